@@ -1,0 +1,95 @@
+"""Benchmarks: ``python -m wdss.bench wavelets``.
+
+Every benchmark reports medians of repeated runs and ratios measured in the same process, never absolute
+targets: timing on shared machines is noisy, so comparisons are only made within one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from collections.abc import Callable, Sequence
+
+import torch
+from rich.console import Console
+from rich.table import Table
+
+BASES = ("haar", "db4", "sym4")
+
+
+def median_ms(fn: Callable[[], object], *, repeats: int, warmup: int = 1) -> float:
+    """Median wall-clock milliseconds of ``fn()`` over ``repeats`` runs after ``warmup`` runs."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        _synchronize()
+        start = time.perf_counter()
+        fn()
+        _synchronize()
+        times.append((time.perf_counter() - start) * 1e3)
+    return statistics.median(times)
+
+
+def _synchronize() -> None:
+    if torch.cuda.is_available():
+        torch.cuda.synchronize()
+
+
+# --------------------------------------------------------------------------------------------------------
+# wavelets
+# --------------------------------------------------------------------------------------------------------
+
+
+def _ptwt_swt2_roundtrip(x: torch.Tensor, wavelet: str) -> torch.Tensor:
+    """A level-1 2-D SWT composed from ptwt's 1-D ``swt``/``iswt``: along W, then along H per branch."""
+    import ptwt
+
+    low_w, high_w = ptwt.swt(x, wavelet, level=1, axis=-1)
+    bands = [band for branch in (low_w, high_w) for band in ptwt.swt(branch, wavelet, level=1, axis=-2)]
+    low = ptwt.iswt(bands[:2], wavelet, axis=-2)
+    high = ptwt.iswt(bands[2:], wavelet, axis=-2)
+    return ptwt.iswt([low, high], wavelet, axis=-1)
+
+
+def _ptwt_dwt2_roundtrip(x: torch.Tensor, wavelet: str) -> torch.Tensor:
+    import ptwt
+
+    return ptwt.waverec2(ptwt.wavedec2(x, wavelet, mode="periodic", level=1), wavelet)
+
+
+def bench_wavelets(shape: Sequence[int], repeats: int, device: str, bases: Sequence[str] = BASES) -> Table:
+    from wdss.wavelets import WaveletTransform
+
+    x = torch.rand(*shape, device=device)
+    table = Table(title=f"wavelet analysis + synthesis, {tuple(shape)} float32 on {device}, median of {repeats}")
+    for column in ("transform", "basis", "wdss ms", "ptwt ms", "ptwt / wdss"):
+        table.add_column(column, justify="right" if "ms" in column or "/" in column else "left")
+    with torch.inference_mode():
+        for transform, reference in (("dwt", _ptwt_dwt2_roundtrip), ("swt", _ptwt_swt2_roundtrip)):
+            for basis in bases:
+                module = WaveletTransform(transform, basis).to(device)
+                ours = median_ms(lambda m=module: m.synthesis(m.analysis(x)), repeats=repeats)
+                theirs = median_ms(lambda b=basis, r=reference: r(x, b), repeats=repeats)
+                table.add_row(transform, basis, f"{ours:.1f}", f"{theirs:.1f}", f"{theirs / ours:.2f}x")
+    return table
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m wdss.bench", description=__doc__)
+    sub = parser.add_subparsers(dest="what", required=True)
+    wav = sub.add_parser("wavelets", help="DWT/SWT analysis+synthesis against ptwt")
+    wav.add_argument("--shape", type=int, nargs=4, default=(1, 12, 1080, 1920), metavar=("N", "C", "H", "W"))
+    wav.add_argument("--repeats", type=int, default=5)
+    wav.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    wav.add_argument("--bases", nargs="+", default=list(BASES))
+    args = parser.parse_args(argv)
+
+    console = Console()
+    if args.what == "wavelets":
+        console.print(bench_wavelets(args.shape, args.repeats, args.device, args.bases))
+
+
+if __name__ == "__main__":
+    main()
