@@ -1,0 +1,50 @@
+# wdss: run `make help` for the targets. Every target installs what it needs first.
+.DEFAULT_GOAL := help
+SHELL := /bin/bash
+
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+# torch is pinned in constraints.txt so that no requirement can pull a CUDA build on a CPU machine.
+PIP_INSTALL := $(PY) -m pip install --disable-pip-version-check -q -c constraints.txt
+export MLFLOW_DISABLE_TELEMETRY ?= true
+
+.PHONY: help setup setup-render test test-fast lint format train bench clean
+
+help: ## list the targets
+	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | sort | \
+		awk 'BEGIN {FS = ":.*## "}; {printf "  \033[36m%-14s\033[0m %s\n", $$1, $$2}'
+
+setup: $(VENV)/.installed ## create .venv and install wdss with its dev tools (pytest, ruff)
+
+$(VENV)/.installed: pyproject.toml constraints.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP_INSTALL) -e '.[dev]'
+	touch $@
+
+setup-render: setup ## also install Blender's bpy (the `render` extra, ~400 MB)
+	$(PIP_INSTALL) -e '.[dev,render]'
+
+test: setup ## run the whole test suite, slow tests included
+	$(PY) -m pytest
+
+test-fast: setup ## run the tests not marked slow
+	$(PY) -m pytest -m "not slow"
+
+lint: setup ## ruff: lint and format check
+	$(PY) -m ruff check src tests
+	$(PY) -m ruff format --check src tests
+
+format: setup ## ruff: fix what can be fixed and format
+	$(PY) -m ruff check --fix src tests
+	$(PY) -m ruff format src tests
+
+train: setup ## a short default training run, tracked in MLflow
+	$(PY) -m wdss.train
+
+bench: setup ## benchmarks: wavelet transforms against ptwt
+	$(PY) -m wdss.bench wavelets
+
+clean: ## remove caches (keeps .venv, data and mlflow.db)
+	rm -rf .pytest_cache .ruff_cache src/*.egg-info
+	find . -name __pycache__ -type d -not -path './.venv/*' -exec rm -rf {} +
