@@ -1,0 +1,173 @@
+"""The LightningDataModule: scenes on disk -> batches of named float32 tensors.
+
+Batch keys (only those the model asks for are built, and only the files they need are opened):
+
+=================  ===========================  ================================================================
+key                shape                        meaning
+=================  ===========================  ================================================================
+``target``         (N, 3, H, W)                 high-resolution linear HDR colour (ground truth)
+``brdf``           (N, 3, H, W)                 high-resolution BRDF factor F, 1 where F vanishes
+``lr``             (N, 3, h, w)                 low-resolution input: irradiance colour / F_lr (or colour when
+                                                ``preprocessing.demodulate`` is false)
+``lr_color``       (N, 3, h, w)                 low-resolution colour (for image-space baselines)
+``lr_brdf``        (N, 3, h, w)                 low-resolution BRDF factor
+``gbuffer``        (N, 11, H, W)                base colour 3, depth 1, normal 3, specular, roughness, NoV,
+                                                metallic (``wdss.data.dataset.GBUFFER_STACK``)
+``spatial_mask``   (N, 1, H, W)                 1 where HR and upsampled LR G-buffers disagree
+``history``        (N, 3, H, W)                 previous HR frame (irradiance), warped by the motion vectors
+``temporal_mask``  (N, 5, H, W)                 |d depth|, |d albedo| (3), (1 - n.n')/2 against the warped previous
+``motion``         (N, 2, H, W)                 motion vectors, HR pixels, current - previous, y up
+``scale``          (N,)                         the nominal scale s of the batch (h = round(H / s))
+``sequence``       list[str], ``frame`` (N,)    where each sample comes from
+=================  ===========================  ================================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import lightning as L
+import torch
+from torch.utils.data import DataLoader
+
+from wdss.data.dataset import Collate, FrameDataset, Preprocessing
+from wdss.data.layouts import SceneError, Sequence, discover_sequences
+
+__all__ = ["SceneDataModule"]
+
+SPLITS = ("train", "val", "test")
+
+
+def _parse_split(entries: Iterable[Any]) -> tuple[list[str], dict[str, tuple[int, int]]]:
+    """``["seq", {"name": "seq2", "frames": [start, stop]}]`` -> names and frame ranges (stop exclusive)."""
+    names, ranges = [], {}
+    for entry in entries:
+        if isinstance(entry, str):
+            names.append(entry)
+        elif isinstance(entry, Mapping) and "name" in entry:
+            names.append(str(entry["name"]))
+            if entry.get("frames") is not None:
+                start, stop = entry["frames"]
+                ranges[str(entry["name"])] = (int(start), int(stop))
+        else:
+            raise ValueError(f"data.splits entries are names or {{name, frames: [start, stop]}}, got {entry!r}")
+    return names, ranges
+
+
+class SceneDataModule(L.LightningDataModule):
+    """Train/val/test splits of rendered sequences, by sequence name (see the module docstring for keys).
+
+    ``inputs`` are the batch keys the model consumes (the model config declares them). ``scale`` is a fixed
+    training scale or a ``[low, high]`` range sampled per batch; validation runs full frames at
+    ``val_scale`` and testing at every scale of ``test_scales`` (one dataloader each). ``prepare`` is called
+    with ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset).
+    """
+
+    def __init__(
+        self,
+        root: str | Path,
+        splits: Mapping[str, Iterable[Any]],
+        inputs: Iterable[str],
+        *,
+        layout: str = "auto",
+        scale: float | Iterable[float] = 2.0,
+        val_scale: float | None = None,
+        test_scales: Iterable[float] = (2.0, 3.0, 4.0),
+        patch_size: int | None = 96,
+        batch_size: int = 8,
+        eval_batch_size: int = 1,
+        num_workers: int = 0,
+        pin_memory: bool = True,
+        preprocessing: Preprocessing | Mapping[str, Any] | None = None,
+        flips: bool = False,
+        first_frame: str = "skip",
+        seed: int = 0,
+        prepare: Callable[[Path], None] | None = None,
+    ) -> None:
+        super().__init__()
+        self.root = Path(root)
+        unknown = set(splits) - set(SPLITS)
+        if unknown:
+            raise ValueError(f"data.splits has unknown split(s) {sorted(unknown)}: expected train, val, test")
+        self.splits = {name: _parse_split(entries) for name, entries in splits.items()}
+        self.inputs = tuple(inputs)
+        self.layout = layout
+        self.scale = tuple(float(s) for s in scale) if isinstance(scale, Iterable) else float(scale)
+        if isinstance(self.scale, tuple) and len(self.scale) != 2:
+            raise ValueError(f"data.scale is a number or [low, high], got {list(self.scale)}")
+        self.val_scale = float(val_scale) if val_scale is not None else self._middle(self.scale)
+        self.test_scales = tuple(float(s) for s in test_scales)
+        self.patch_size = patch_size
+        self.batch_size = batch_size
+        self.eval_batch_size = eval_batch_size
+        self.num_workers = num_workers
+        self.pin_memory = pin_memory and torch.cuda.is_available()
+        if isinstance(preprocessing, Preprocessing):
+            self.prep = preprocessing
+        else:
+            self.prep = Preprocessing(**dict(preprocessing or {}))
+        self.flips = flips
+        self.first_frame = first_frame
+        self.seed = seed
+        self.prepare = prepare
+        self.datasets: dict[str, Any] = {}
+
+    @staticmethod
+    def _middle(scale: float | tuple[float, float]) -> float:
+        return float(scale) if not isinstance(scale, tuple) else round(sum(scale) / 2, 3)
+
+    def prepare_data(self) -> None:
+        if self.prepare is not None and not self.root.exists():
+            self.prepare(self.root)
+
+    def _sequences(self, split: str) -> tuple[list[Sequence], dict[str, tuple[int, int]]]:
+        if split not in self.splits:
+            raise SceneError(f"data.splits has no {split!r} split")
+        names, ranges = self.splits[split]
+        return discover_sequences(self.root, names, self.layout), ranges
+
+    def _dataset(self, split: str, scale: float | tuple[float, float], patch: int | None) -> FrameDataset:
+        sequences, ranges = self._sequences(split)
+        return FrameDataset(
+            sequences,
+            self.inputs,
+            scale=scale,
+            patch=patch,
+            preprocessing=self.prep,
+            flips=self.flips and split == "train",
+            first_frame=self.first_frame,
+            frame_ranges=ranges,
+        )
+
+    def setup(self, stage: str | None = None) -> None:
+        if stage in ("fit", None) and "train" not in self.datasets:
+            self.datasets["train"] = self._dataset("train", self.scale, self.patch_size)
+        if stage in ("fit", "validate", None) and "val" not in self.datasets and "val" in self.splits:
+            self.datasets["val"] = self._dataset("val", self.val_scale, None)
+        if stage in ("test", None) and "test" not in self.datasets:
+            self.datasets["test"] = [self._dataset("test", s, None) for s in self.test_scales]
+
+    def _loader(self, dataset: FrameDataset, batch_size: int, *, train: bool) -> DataLoader:
+        generator = torch.Generator().manual_seed(self.seed) if train else None
+        return DataLoader(
+            dataset,
+            batch_size=batch_size,
+            shuffle=train,
+            drop_last=train and len(dataset) >= batch_size,
+            num_workers=self.num_workers,
+            pin_memory=self.pin_memory,
+            persistent_workers=self.num_workers > 0,
+            collate_fn=Collate(self.inputs, self.prep, dataset.scale),
+            generator=generator,
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        return self._loader(self.datasets["train"], self.batch_size, train=True)
+
+    def val_dataloader(self) -> DataLoader:
+        return self._loader(self.datasets["val"], self.eval_batch_size, train=False)
+
+    def test_dataloader(self) -> list[DataLoader]:
+        return [self._loader(ds, self.eval_batch_size, train=False) for ds in self.datasets["test"]]

@@ -1,0 +1,314 @@
+"""Frames on disk -> named training and evaluation batches.
+
+:class:`FrameDataset` reads, per sample, only the buffers that the requested batch keys need (from the
+current and previous high-resolution frame and, where one matches the scale, a native low-resolution
+folder), cleans them (non-finite check, far-depth clamp, depth normalisation, unit normals), crops a patch
+and mirrors it. :class:`Collate` then works on the whole batch, in the loader's worker: it picks the
+batch's scale, point-samples the low-resolution frame where no native one was read, computes BRDF factors,
+demodulates, warps the history and computes the masks. The batch keys are documented in
+:mod:`wdss.data.datamodule`.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable
+from collections.abc import Sequence as Seq
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import Tensor
+from torch.utils.data import Dataset
+
+from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf, split_sum_brdf
+from wdss.data.layouts import BUFFERS, SceneError, Sequence
+from wdss.data.sampling import flip, lr_size, point_sample, scale_matches
+from wdss.data.warp import normalize_normals, spatial_mask, temporal_mask, warp_backward
+
+__all__ = ["BATCH_KEYS", "GBUFFER_STACK", "Collate", "FrameDataset", "Preprocessing", "requirements"]
+
+log = logging.getLogger(__name__)
+
+# The high-resolution G-buffer stack of the network, in channel order (11 channels).
+GBUFFER_STACK = ("base_color", "depth", "normal", "specular", "roughness", "nov", "metallic")
+BATCH_KEYS = (
+    "target",
+    "brdf",
+    "lr",
+    "lr_color",
+    "lr_brdf",
+    "gbuffer",
+    "spatial_mask",
+    "history",
+    "temporal_mask",
+    "motion",
+)
+_MASK_BUFFERS = {"depth", "normal", "base_color"}
+
+
+@dataclass
+class Preprocessing:
+    """How buffers become batch tensors (the ``data.preprocessing`` config)."""
+
+    brdf: str = "extranet"  # extranet | split_sum
+    demodulate: bool = True  # lr and history are irradiance (colour / F) rather than colour
+    depth_far: float | None = 100.0  # depth beyond this is background: set to 0 (the authors' loader)
+    depth_normalize: bool = True  # per-frame min-max normalisation of depth (DFASR)
+    color_max: float | None = None  # clip HDR colour to [0, color_max] at load (the authors used 10)
+    sanitize: bool = False  # replace non-finite values by 0 and count them, instead of failing
+    spatial_thresholds: dict = field(default_factory=lambda: {"depth": 0.01, "normal": 0.9, "albedo": 0.1})
+
+    def __post_init__(self) -> None:
+        if self.brdf not in ("extranet", "split_sum"):
+            raise ValueError(f"data.preprocessing.brdf must be 'extranet' or 'split_sum', got {self.brdf!r}")
+
+    @property
+    def brdf_buffers(self) -> set[str]:
+        extra = {"roughness", "nov"} if self.brdf == "split_sum" else set()
+        return {"base_color", "metallic", "specular"} | extra
+
+
+def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]]:
+    """Buffers per role (``hr``: current frame, ``prev``: previous frame, ``lr``: low resolution) for ``keys``."""
+    keys = set(keys)
+    unknown = keys - set(BATCH_KEYS) - {"scale"}
+    if unknown:
+        raise ValueError(f"unknown batch keys {sorted(unknown)}: expected some of {', '.join(BATCH_KEYS)}")
+    need: dict[str, set[str]] = {"hr": set(), "prev": set(), "lr": set()}
+    brdf = prep.brdf_buffers
+    if "target" in keys:
+        need["hr"] |= {"color"}
+    if "brdf" in keys:
+        need["hr"] |= brdf
+    if "lr" in keys:
+        need["lr"] |= {"color"} | (brdf if prep.demodulate else set())
+    if "lr_color" in keys:
+        need["lr"] |= {"color"}
+    if "lr_brdf" in keys:
+        need["lr"] |= brdf
+    if "gbuffer" in keys:
+        need["hr"] |= set(GBUFFER_STACK)
+    if "spatial_mask" in keys:
+        need["hr"] |= _MASK_BUFFERS
+        need["lr"] |= _MASK_BUFFERS
+    if "history" in keys:
+        need["prev"] |= {"color"} | (brdf if prep.demodulate else set())
+        need["hr"] |= {"motion"}
+    if "temporal_mask" in keys:
+        need["hr"] |= _MASK_BUFFERS | {"motion"}
+        need["prev"] |= _MASK_BUFFERS
+    if "motion" in keys:
+        need["hr"] |= {"motion"}
+    return need
+
+
+def _clean(buffers: dict[str, np.ndarray], prep: Preprocessing) -> dict[str, Tensor]:
+    out = {}
+    for name, value in buffers.items():
+        t = torch.from_numpy(value)
+        if name == "depth":
+            if prep.depth_far is not None:
+                t = torch.where(t > prep.depth_far, torch.zeros_like(t), t)
+            if prep.depth_normalize:
+                lo, hi = t.min(), t.max()
+                t = (t - lo) / (1e-6 + torch.clamp(hi, min=1.0) - lo)
+        elif name == "normal":
+            t = normalize_normals(t[None])[0]
+        elif name == "color" and prep.color_max is not None:
+            t = t.clamp(0.0, prep.color_max)
+        out[name] = t
+    return out
+
+
+class FrameDataset(Dataset):
+    """Samples of one split: every frame of every sequence (that has history, where history is needed).
+
+    ``scale``: a number (fixed scale) or a ``(low, high)`` range sampled per batch by :class:`Collate`.
+    ``patch``: high-resolution patch size for training, ``None`` for full frames.
+    ``first_frame``: ``"skip"`` leaves out frames without a previous frame when history is needed;
+    ``"zeros"`` keeps them with zero history.
+    """
+
+    def __init__(
+        self,
+        sequences: Seq[Sequence],
+        keys: Iterable[str],
+        *,
+        scale: float | tuple[float, float] = 2.0,
+        patch: int | None = None,
+        preprocessing: Preprocessing | None = None,
+        flips: bool = False,
+        first_frame: str = "skip",
+        frame_ranges: dict[str, tuple[int, int]] | None = None,
+    ) -> None:
+        if first_frame not in ("skip", "zeros"):
+            raise ValueError(f"first_frame must be 'skip' or 'zeros', got {first_frame!r}")
+        self.sequences = list(sequences)
+        self.keys = tuple(keys)
+        self.prep = preprocessing or Preprocessing()
+        self.scale = scale
+        self.patch = patch
+        self.flips = flips
+        self.first_frame = first_frame
+        self.need = requirements(self.keys, self.prep)
+        history = bool(self.need["prev"])
+        self.items: list[tuple[int, int]] = []
+        for index, seq in enumerate(self.sequences):
+            frames = seq.frames
+            if frame_ranges and seq.name in frame_ranges:
+                start, stop = frame_ranges[seq.name]
+                frames = [f for f in frames if start <= f < stop]
+            available = set(seq.frames)
+            for frame in frames:
+                if history and first_frame == "skip" and frame - 1 not in available:
+                    continue
+                self.items.append((index, frame))
+        if not self.items:
+            names = ", ".join(s.name for s in self.sequences)
+            raise SceneError(f"no usable frames in sequences [{names}] (history needs two consecutive frames)")
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def native_lr(self, seq: Sequence) -> int | None:
+        """The native low-resolution folder that matches a fixed scale, if any."""
+        if isinstance(self.scale, (tuple, list)) or not self.need["lr"]:
+            return None
+        for height in seq.resolutions[1:]:
+            if scale_matches(seq.hr, height, float(self.scale)):
+                return height
+        return None
+
+    def _read(self, seq: Sequence, frame: int, height: int, buffers: set[str]) -> dict[str, Tensor]:
+        return _clean(seq.read(frame, height, sorted(buffers), sanitize=self.prep.sanitize), self.prep)
+
+    def __getitem__(self, index: int) -> dict:
+        seq_index, frame = self.items[index]
+        seq = self.sequences[seq_index]
+        lr_height = self.native_lr(seq)
+        hr_need = set(self.need["hr"]) | (set() if lr_height else self.need["lr"])
+        hr = self._read(seq, frame, seq.hr, hr_need) if hr_need else {}
+        lr = self._read(seq, frame, lr_height, self.need["lr"]) if lr_height else {}
+        prev: dict[str, Tensor] = {}
+        has_history = frame - 1 in set(seq.frames)
+        if self.need["prev"]:
+            if has_history:
+                prev = self._read(seq, frame - 1, seq.hr, self.need["prev"])
+            else:  # first frame, kept with zero history
+                shape = next(iter(hr.values())).shape[-2:]
+                prev = {b: torch.zeros(BUFFERS[b], *shape) for b in self.need["prev"]}
+        hr, prev, lr = self._crop(hr, prev, lr, lr_height and seq.hr / lr_height)
+        if self.flips:
+            horizontal, vertical = bool(torch.rand(()) < 0.5), bool(torch.rand(()) < 0.5)
+            camera = seq.camera(frame)
+            hr = flip(hr, horizontal=horizontal, vertical=vertical, camera=camera)
+            lr = flip(lr, horizontal=horizontal, vertical=vertical, camera=camera)
+            prev_camera = seq.camera(frame - 1) if has_history else camera
+            prev = flip(prev, horizontal=horizontal, vertical=vertical, camera=prev_camera)
+        return {"hr": hr, "prev": prev, "lr": lr, "sequence": seq.name, "frame": frame}
+
+    def _crop(self, hr: dict, prev: dict, lr: dict, native_scale: float | None) -> tuple[dict, dict, dict]:
+        if self.patch is None:
+            return hr, prev, lr
+        full = next(iter(hr.values())) if hr else None
+        height, width = full.shape[-2:] if full is not None else (0, 0)
+        size = self.patch
+        if height < size or width < size:
+            raise SceneError(f"patch size {size} is larger than the frame ({height}x{width})")
+        if native_scale:  # crop on the low-resolution grid so both patches cover the same pixels
+            step = round(native_scale)
+            if size % step:
+                raise SceneError(f"patch size {size} is not a multiple of the native scale {step}")
+            y = int(torch.randint(0, (height - size) // step + 1, ())) * step
+            x = int(torch.randint(0, (width - size) // step + 1, ())) * step
+            ly, lx, lsize = y // step, x // step, size // step
+            lr = {k: v[..., ly : ly + lsize, lx : lx + lsize] for k, v in lr.items()}
+        else:
+            y = int(torch.randint(0, height - size + 1, ()))
+            x = int(torch.randint(0, width - size + 1, ()))
+        def crop(d: dict) -> dict:
+            return {k: v[..., y : y + size, x : x + size] for k, v in d.items()}
+        return crop(hr), crop(prev), lr
+
+
+class Collate:
+    """Stack samples and turn their buffers into the batch's named tensors (runs in loader workers)."""
+
+    def __init__(self, keys: Iterable[str], preprocessing: Preprocessing, scale: float | tuple[float, float]):
+        self.keys = set(keys) | {"scale"}
+        self.prep = preprocessing
+        self.scale = scale
+
+    def pick_scale(self) -> float:
+        if isinstance(self.scale, (tuple, list)):
+            low, high = self.scale
+            return float(low + (high - low) * torch.rand(()).item())
+        return float(self.scale)
+
+    def __call__(self, samples: list[dict]) -> dict:
+        def stack(role: str) -> dict[str, Tensor]:
+            names = samples[0][role].keys()
+            return {name: torch.stack([s[role][name] for s in samples]) for name in names}
+
+        hr, prev, lr = stack("hr"), stack("prev"), stack("lr")
+        scale = self.pick_scale()
+        need_lr = requirements(self.keys - {"scale"}, self.prep)["lr"]
+        if need_lr and not lr:
+            height, width = next(iter(hr.values())).shape[-2:]
+            size = lr_size(height, width, scale)
+            lr = {name: point_sample(hr[name], size) for name in need_lr}
+        batch = build_batch(self.keys, hr, prev, lr, self.prep)
+        batch["scale"] = torch.full((len(samples),), scale)
+        batch["sequence"] = [s["sequence"] for s in samples]
+        batch["frame"] = torch.tensor([s["frame"] for s in samples])
+        return batch
+
+
+def brdf_of(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
+    """The safe BRDF factor (1 where F vanishes) of a set of buffers."""
+    if prep.brdf == "split_sum":
+        raw = split_sum_brdf(
+            buffers["base_color"], buffers["metallic"], buffers["specular"], buffers["roughness"], buffers["nov"]
+        )
+    else:
+        raw = extranet_brdf(buffers["base_color"], buffers["metallic"], buffers["specular"])
+    return safe_brdf(raw)
+
+
+def build_batch(
+    keys: set[str], hr: dict[str, Tensor], prev: dict[str, Tensor], lr: dict[str, Tensor], prep: Preprocessing
+) -> dict[str, Tensor]:
+    """The named batch tensors from stacked ``(N, C, H, W)`` buffers of each role."""
+    batch: dict[str, Tensor] = {}
+    if "target" in keys:
+        batch["target"] = hr["color"]
+    if "brdf" in keys:
+        batch["brdf"] = brdf_of(hr, prep)
+    if "lr" in keys or "lr_brdf" in keys:
+        lr_brdf = brdf_of(lr, prep) if (prep.demodulate or "lr_brdf" in keys) else None
+        if "lr" in keys:
+            batch["lr"] = demodulate(lr["color"], lr_brdf) if prep.demodulate else lr["color"]
+        if "lr_brdf" in keys:
+            batch["lr_brdf"] = lr_brdf
+    if "lr_color" in keys:
+        batch["lr_color"] = lr["color"]
+    if "gbuffer" in keys:
+        batch["gbuffer"] = torch.cat([hr[name] for name in GBUFFER_STACK], dim=1)
+    if "spatial_mask" in keys:
+        t = prep.spatial_thresholds
+        batch["spatial_mask"] = spatial_mask(
+            hr, lr, depth_threshold=t["depth"], normal_threshold=t["normal"], albedo_threshold=t["albedo"]
+        )
+    if "history" in keys or "temporal_mask" in keys:
+        motion = hr["motion"]
+        if "history" in keys:
+            previous = demodulate(prev["color"], brdf_of(prev, prep)) if prep.demodulate else prev["color"]
+            batch["history"] = warp_backward(previous, motion)
+        if "temporal_mask" in keys:
+            stacked = torch.cat([prev[name] for name in ("depth", "base_color", "normal")], dim=1)
+            warped = dict(zip(("depth", "base_color", "normal"), warp_backward(stacked, motion).split([1, 3, 3], 1)))
+            batch["temporal_mask"] = temporal_mask(hr, warped)
+    if "motion" in keys:
+        batch["motion"] = hr["motion"]
+    return batch

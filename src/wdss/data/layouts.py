@@ -1,0 +1,388 @@
+"""Scene layouts on disk: which file and channel holds each buffer, at each resolution, for each frame.
+
+A *sequence* is a folder (or one ``.zip`` of that folder) of consecutive frames. A *layout* is the naming
+convention inside it. Two are known, and a renderer that writes one of them needs no reader of its own:
+
+* :class:`UnrealLayout`, the WDSS authors' capture plugin: resolution folders ``<H>P`` (``1080P``, ``540P``,
+  ...) holding four RGBA files per frame, ``BaseColorDepth.NNNN.exr`` (base colour, depth),
+  ``NormalSpecular.NNNN.exr`` (world normal, specular), ``PretonemapMetallic.NNNN.exr`` (HDR colour,
+  metallic) and ``MV_Roughness_NOV.NNNN.exr`` (motion vector, roughness, NoV).
+* :class:`DFASRLayout`: ``GBuffer-<H>P/`` (high-resolution G-buffers) and ``Nojitter-<H>P/`` (colour and
+  low-resolution buffers) of ``<prefix><Buffer>.NNNN.exr`` files, ``<Buffer>`` one of
+  ``PreTonemapHDRColor``, ``BaseColor``, ``WorldNormalAndSceneDepth``, ``MotionVectorAndMetallicAndRoughness``,
+  ``NoV``, ``Specular``.
+
+Buffers (channels): ``color`` 3 (linear HDR radiance), ``base_color`` 3, ``depth`` 1, ``normal`` 3 (world
+space), ``specular`` 1, ``metallic`` 1, ``roughness`` 1, ``nov`` 1, ``motion`` 2 (high-resolution pixels,
+current minus previous screen position, y up).
+
+Reading opens only the files that hold a requested buffer, each at most once per call, and returns only the
+requested channels; a requested buffer that is missing is an error naming sequence, frame, file and channel.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import zipfile
+from abc import ABC, abstractmethod
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from wdss.data.exr import read_exr
+
+__all__ = [
+    "BUFFERS",
+    "DFASRLayout",
+    "SceneError",
+    "SceneLayout",
+    "Sequence",
+    "UnrealLayout",
+    "discover_sequences",
+]
+
+BUFFERS: dict[str, int] = {
+    "color": 3,
+    "base_color": 3,
+    "depth": 1,
+    "normal": 3,
+    "specular": 1,
+    "metallic": 1,
+    "roughness": 1,
+    "nov": 1,
+    "motion": 2,
+}
+
+log = logging.getLogger(__name__)
+
+_FRAME_FILE = re.compile(r"^(?P<stem>.+)\.(?P<frame>\d+)\.exr$")
+
+
+class SceneError(ValueError):
+    """A scene that does not hold what was asked of it: missing buffer, frame, file, channel or size."""
+
+
+@dataclass(frozen=True)
+class Slot:
+    """Where a buffer lives: the file stem and its channels, in the buffer's channel order."""
+
+    stem: str
+    channels: tuple[str, ...]
+
+
+# --------------------------------------------------------------------------------------------------------
+# Sources: a folder or a zip, with every read counted
+# --------------------------------------------------------------------------------------------------------
+
+
+class Source:
+    """The files of one sequence, from a folder or a zip; ``opens`` counts the files read so far."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.opens = 0
+        self._zip: zipfile.ZipFile | None = None
+        if self.path.is_dir():
+            self.names = sorted(
+                str(p.relative_to(self.path)).replace("\\", "/") for p in self.path.rglob("*.exr") if p.is_file()
+            )
+            self._prefix = ""
+        elif zipfile.is_zipfile(self.path):
+            with zipfile.ZipFile(self.path) as archive:
+                names = sorted(n for n in archive.namelist() if n.endswith(".exr"))
+            # A zip of the sequence folder may keep that folder as its top level.
+            top = {n.split("/", 1)[0] for n in names if "/" in n}
+            self._prefix = f"{top.pop()}/" if len(top) == 1 and not self._has_resolution_dirs(names) else ""
+            self.names = [n[len(self._prefix) :] for n in names]
+        else:
+            raise SceneError(f"sequence {self.path} is neither a folder nor a zip file")
+
+    @staticmethod
+    def _has_resolution_dirs(names: list[str]) -> bool:
+        return any(re.fullmatch(r"(?:(?:GBuffer|Nojitter)-)?\d+P", n.split("/", 1)[0]) for n in names if "/" in n)
+
+    def describe(self, name: str) -> str:
+        return f"{self.path}/{name}" if self.path.is_dir() else f"{self.path}:{self._prefix}{name}"
+
+    def has(self, name: str) -> bool:
+        if self.path.is_dir():
+            return (self.path / name).is_file()
+        with zipfile.ZipFile(self.path) as archive:
+            return self._prefix + name in archive.namelist()
+
+    def read_bytes(self, name: str) -> bytes:
+        if self.path.is_dir():
+            return (self.path / name).read_bytes()
+        with zipfile.ZipFile(self.path) as archive:
+            return archive.read(self._prefix + name)
+
+    def read(self, name: str, channels: Iterable[str]) -> dict[str, np.ndarray]:
+        self.opens += 1
+        if self.path.is_dir():
+            return read_exr(self.path / name, channels, name=self.describe(name))
+        if self._zip is None:
+            self._zip = zipfile.ZipFile(self.path)
+        return read_exr(self._zip.read(self._prefix + name), channels, name=self.describe(name))
+
+    def __getstate__(self) -> dict:  # zip handles do not cross process boundaries (DataLoader workers)
+        state = dict(self.__dict__)
+        state["_zip"] = None
+        return state
+
+
+# --------------------------------------------------------------------------------------------------------
+# Layouts
+# --------------------------------------------------------------------------------------------------------
+
+
+class SceneLayout(ABC):
+    """A naming convention: resolution folders and the slot of every buffer."""
+
+    name: str
+
+    @classmethod
+    @abstractmethod
+    def matches(cls, names: list[str]) -> bool:
+        """Whether a sequence's file list follows this layout."""
+
+    @abstractmethod
+    def resolutions(self, names: list[str]) -> list[int]:
+        """The heights of the resolutions present, largest first."""
+
+    @abstractmethod
+    def locate(self, buffer: str, height: int, frame: int, index: dict) -> tuple[str, Slot] | None:
+        """The file (relative name) and slot of ``buffer`` at ``height`` for ``frame``, or None if absent."""
+
+    @abstractmethod
+    def expected(self, buffer: str, height: int, frame: int) -> str:
+        """The file a buffer would be in, for error messages."""
+
+    @abstractmethod
+    def index(self, names: list[str]) -> dict:
+        """A lookup table built once from the file list."""
+
+    def frames(self, index: dict, height: int) -> list[int]:
+        return sorted({frame for (folder_height, _, frame) in index if folder_height == height})
+
+
+class UnrealLayout(SceneLayout):
+    """The WDSS authors' Unreal Engine capture layout (REFERENCE.md section 4)."""
+
+    name = "unreal"
+    SLOTS: dict[str, Slot] = {
+        "base_color": Slot("BaseColorDepth", ("R", "G", "B")),
+        "depth": Slot("BaseColorDepth", ("A",)),
+        "normal": Slot("NormalSpecular", ("R", "G", "B")),
+        "specular": Slot("NormalSpecular", ("A",)),
+        "color": Slot("PretonemapMetallic", ("R", "G", "B")),
+        "metallic": Slot("PretonemapMetallic", ("A",)),
+        "motion": Slot("MV_Roughness_NOV", ("R", "G")),
+        "roughness": Slot("MV_Roughness_NOV", ("B",)),
+        "nov": Slot("MV_Roughness_NOV", ("A",)),
+    }
+    _FOLDER = re.compile(r"^(\d+)P$")
+
+    @classmethod
+    def matches(cls, names: list[str]) -> bool:
+        return any(cls._FOLDER.match(n.split("/", 1)[0]) for n in names if "/" in n)
+
+    def resolutions(self, names: list[str]) -> list[int]:
+        return sorted({int(m.group(1)) for n in names if (m := self._FOLDER.match(n.split("/", 1)[0]))}, reverse=True)
+
+    def index(self, names: list[str]) -> dict:
+        table = {}
+        for name in names:
+            folder, _, file = name.partition("/")
+            folder_match, file_match = self._FOLDER.match(folder), _FRAME_FILE.match(file)
+            if folder_match and file_match:
+                table[(int(folder_match.group(1)), file_match.group("stem"), int(file_match.group("frame")))] = name
+        return table
+
+    def locate(self, buffer: str, height: int, frame: int, index: dict) -> tuple[str, Slot] | None:
+        slot = self.SLOTS[buffer]
+        name = index.get((height, slot.stem, frame))
+        return (name, slot) if name else None
+
+    def expected(self, buffer: str, height: int, frame: int) -> str:
+        return f"{height}P/{self.SLOTS[buffer].stem}.{frame:04d}.exr"
+
+
+class DFASRLayout(SceneLayout):
+    """DFASR's layout: ``GBuffer-<H>P`` and ``Nojitter-<H>P`` folders of prefixed buffer files."""
+
+    name = "dfasr"
+    SLOTS: dict[str, Slot] = {
+        "color": Slot("PreTonemapHDRColor", ("R", "G", "B")),
+        "base_color": Slot("BaseColor", ("R", "G", "B")),
+        "normal": Slot("WorldNormalAndSceneDepth", ("R", "G", "B")),
+        "depth": Slot("WorldNormalAndSceneDepth", ("A",)),
+        "motion": Slot("MotionVectorAndMetallicAndRoughness", ("R", "G")),
+        "metallic": Slot("MotionVectorAndMetallicAndRoughness", ("B",)),
+        "roughness": Slot("MotionVectorAndMetallicAndRoughness", ("A",)),
+        "nov": Slot("NoV", ("R",)),
+        "specular": Slot("Specular", ("R",)),
+    }
+    _FOLDER = re.compile(r"^(GBuffer|Nojitter)-(\d+)P$")
+    _STEMS = sorted({s.stem for s in SLOTS.values()}, key=len, reverse=True)
+
+    @classmethod
+    def matches(cls, names: list[str]) -> bool:
+        return any(cls._FOLDER.match(n.split("/", 1)[0]) for n in names if "/" in n)
+
+    def resolutions(self, names: list[str]) -> list[int]:
+        return sorted({int(m.group(2)) for n in names if (m := self._FOLDER.match(n.split("/", 1)[0]))}, reverse=True)
+
+    def index(self, names: list[str]) -> dict:
+        table: dict = {}
+        for name in names:
+            folder, _, file = name.partition("/")
+            folder_match, file_match = self._FOLDER.match(folder), _FRAME_FILE.match(file)
+            if not (folder_match and file_match):
+                continue
+            stem = next((s for s in self._STEMS if file_match.group("stem").endswith(s)), None)
+            if stem is None:
+                continue
+            kind, height = folder_match.group(1), int(folder_match.group(2))
+            # High-resolution G-buffers live in GBuffer-<H>P; colour and everything else in Nojitter-<H>P.
+            key = (height, stem, int(file_match.group("frame")))
+            if kind == "GBuffer" or key not in table:
+                table[key] = name
+        return table
+
+    def locate(self, buffer: str, height: int, frame: int, index: dict) -> tuple[str, Slot] | None:
+        slot = self.SLOTS[buffer]
+        name = index.get((height, slot.stem, frame))
+        return (name, slot) if name else None
+
+    def expected(self, buffer: str, height: int, frame: int) -> str:
+        folder = "Nojitter" if buffer == "color" else "GBuffer or Nojitter"
+        return f"{folder}-{height}P/<prefix>{self.SLOTS[buffer].stem}.{frame:04d}.exr"
+
+
+LAYOUTS: dict[str, type[SceneLayout]] = {"unreal": UnrealLayout, "dfasr": DFASRLayout}
+
+
+# --------------------------------------------------------------------------------------------------------
+# A sequence: source + layout
+# --------------------------------------------------------------------------------------------------------
+
+
+class Sequence:
+    """One sequence of frames in a known layout; :meth:`read` loads named buffers of one frame."""
+
+    def __init__(self, path: str | Path, layout: str = "auto") -> None:
+        self.source = Source(path)
+        self.name = self.source.path.name.removesuffix(".zip")
+        names = self.source.names
+        if not names:
+            raise SceneError(f"sequence {self.source.path} holds no EXR files")
+        if layout == "auto":
+            found = [cls for cls in LAYOUTS.values() if cls.matches(names)]
+            if len(found) != 1:
+                raise SceneError(
+                    f"sequence {self.source.path}: cannot tell its layout (found folders "
+                    f"{sorted({n.split('/', 1)[0] for n in names})[:6]}); expected <H>P/ folders (unreal) or "
+                    "GBuffer-<H>P/ and Nojitter-<H>P/ (dfasr)"
+                )
+            self.layout: SceneLayout = found[0]()
+        elif layout in LAYOUTS:
+            if not LAYOUTS[layout].matches(names):
+                raise SceneError(f"sequence {self.source.path} is not in the {layout!r} layout")
+            self.layout = LAYOUTS[layout]()
+        else:
+            raise SceneError(f"unknown scene layout {layout!r}: expected auto, {', '.join(LAYOUTS)}")
+        self._index = self.layout.index(names)
+        self.resolutions = self.layout.resolutions(names)
+        self.hr = self.resolutions[0]
+        self.frames = self.layout.frames(self._index, self.hr)
+        self.sanitized: dict[str, int] = {}
+        self._cameras: dict[int, torch.Tensor] | None = None
+
+    def __repr__(self) -> str:
+        return f"Sequence({self.name!r}, layout={self.layout.name}, resolutions={self.resolutions}, frames={len(self.frames)})"
+
+    def has(self, buffer: str, height: int, frame: int | None = None) -> bool:
+        return self.layout.locate(buffer, height, self.frames[0] if frame is None else frame, self._index) is not None
+
+    def camera(self, frame: int) -> torch.Tensor | None:
+        """The 3x3 camera-to-world rotation of ``frame`` from the sidecar ``sequence.json``, if there is one."""
+        if self._cameras is None:
+            self._cameras = {}
+            if self.source.has("sequence.json"):
+                meta = json.loads(self.source.read_bytes("sequence.json"))
+                for entry in meta.get("frames", []):
+                    matrix = torch.tensor(entry["camera_to_world"], dtype=torch.float32)
+                    self._cameras[int(entry["frame"])] = matrix[:3, :3]
+        return self._cameras.get(frame)
+
+    def read(
+        self, frame: int, height: int, buffers: Iterable[str], *, sanitize: bool = False
+    ) -> dict[str, np.ndarray]:
+        """The requested buffers of one frame at one resolution, as float32 ``(C, H, W)`` arrays.
+
+        Non-finite values are an error naming file, channel, frame and count; with ``sanitize`` they are
+        replaced by 0, counted in :attr:`sanitized` (per file) and logged.
+        """
+        wanted = list(dict.fromkeys(buffers))
+        by_file: dict[str, list[tuple[str, Slot]]] = {}
+        for buffer in wanted:
+            if buffer not in BUFFERS:
+                raise SceneError(f"unknown buffer {buffer!r}: expected one of {', '.join(BUFFERS)}")
+            found = self.layout.locate(buffer, height, frame, self._index)
+            if found is None:
+                raise SceneError(
+                    f"sequence {self.name!r}, frame {frame}: buffer {buffer!r} is missing at {height}P "
+                    f"(expected {self.layout.expected(buffer, height, frame)}, channels "
+                    f"{','.join(self.layout.SLOTS[buffer].channels)})"  # type: ignore[attr-defined]
+                )
+            by_file.setdefault(found[0], []).append((buffer, found[1]))
+        out: dict[str, np.ndarray] = {}
+        shapes: dict[str, tuple[int, int]] = {}
+        for name, slots in by_file.items():
+            planes = self.source.read(name, [c for _, slot in slots for c in slot.channels])
+            for channel, plane in planes.items():
+                bad = ~np.isfinite(plane)
+                if bad.any():
+                    count = int(bad.sum())
+                    where = f"sequence {self.name!r}, frame {frame}, file {self.source.describe(name)}, channel {channel}"
+                    if not sanitize:
+                        raise SceneError(
+                            f"{where}: {count} non-finite value(s) (NaN or Inf); set data.preprocessing.sanitize=true "
+                            "to replace them by 0"
+                        )
+                    plane[bad] = 0.0
+                    self.sanitized[f"{name}:{channel}"] = self.sanitized.get(f"{name}:{channel}", 0) + count
+                    log.warning("%s: replaced %d non-finite value(s) by 0", where, count)
+            for buffer, slot in slots:
+                out[buffer] = np.stack([planes[c] for c in slot.channels])
+            shapes[name] = next(iter(planes.values())).shape
+        if len(set(shapes.values())) > 1:
+            sizes = ", ".join(f"{self.source.describe(n)} {s[1]}x{s[0]}" for n, s in shapes.items())
+            raise SceneError(f"sequence {self.name!r}, frame {frame}: buffers differ in size at {height}P: {sizes}")
+        return out
+
+
+def discover_sequences(root: str | Path, names: Iterable[str] | None = None, layout: str = "auto") -> list[Sequence]:
+    """The sequences under ``root``: its sub-folders and zip files (or the named ones), sorted by name."""
+    root = Path(root)
+    if not root.is_dir():
+        raise SceneError(f"scene root {root} is not a folder")
+    if names is None:
+        paths = sorted(p for p in root.iterdir() if p.is_dir() or p.suffix == ".zip")
+        if not paths:
+            raise SceneError(f"scene root {root} holds no sequence folders or zip files")
+    else:
+        paths = []
+        for name in names:
+            candidates = [root / name, root / f"{name}.zip"]
+            found = next((p for p in candidates if p.exists()), None)
+            if found is None:
+                available = sorted(p.name for p in root.iterdir())[:10]
+                raise SceneError(f"sequence {name!r} not found under {root} (it holds {available})")
+            paths.append(found)
+    return [Sequence(p, layout) for p in paths]
