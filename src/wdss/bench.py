@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m wdss.bench wavelets``.
+"""Benchmarks: ``python -m wdss.bench wavelets|data``.
 
 Every benchmark reports medians of repeated runs and ratios measured in the same process, never absolute
 targets: timing on shared machines is noisy, so comparisons are only made within one run.
@@ -76,6 +76,50 @@ def bench_wavelets(shape: Sequence[int], repeats: int, device: str, bases: Seque
     return table
 
 
+# --------------------------------------------------------------------------------------------------------
+# data
+# --------------------------------------------------------------------------------------------------------
+
+NO_TEMPORAL_KEYS = ("lr", "gbuffer", "spatial_mask", "brdf", "target")
+
+
+def bench_data(size: tuple[int, int], frames: int, repeats: int, scale: float) -> Table:
+    """Frames per second of reading + preprocessing full frames (one worker) from synthetic scenes."""
+    import tempfile
+    from pathlib import Path
+
+    from wdss.data import BATCH_KEYS, Collate, FrameDataset, Preprocessing, Sequence
+    from wdss.data.synthetic import write_sequence
+
+    height, width = size
+    table = Table(
+        title=f"reading + preprocessing, {width}x{height} HR at {scale}x, {frames} frames, median of {repeats}"
+    )
+    for column in ("EXR compression", "buffers", "files / frame", "frames / s", "ratio"):
+        table.add_column(column, justify="left" if column in ("EXR compression", "buffers") else "right")
+    prep = Preprocessing()
+    with tempfile.TemporaryDirectory() as tmp:
+        for compression in ("none", "zip"):
+            path = write_sequence(
+                Path(tmp) / compression, frames=range(1, frames + 2), size=size, scales=(2, 3), compression=compression
+            )
+            rates = {}
+            for label, keys in (("all (temporal model)", BATCH_KEYS), ("no-temporal model", NO_TEMPORAL_KEYS)):
+                dataset = FrameDataset([Sequence(path)], keys, scale=scale, preprocessing=prep)
+                collate = Collate(keys, prep, scale)
+
+                def run(ds=dataset, co=collate) -> None:
+                    for index in range(len(ds)):
+                        co([ds[index]])
+
+                ms = median_ms(run, repeats=repeats)
+                opens = dataset.sequences[0].source.opens / ((repeats + 1) * len(dataset))
+                rates[label] = len(dataset) / (ms / 1e3)
+                ratio = rates[label] / rates["all (temporal model)"]
+                table.add_row(compression, label, f"{opens:.0f}", f"{rates[label]:.1f}", f"{ratio:.2f}x")
+    return table
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m wdss.bench", description=__doc__)
     sub = parser.add_subparsers(dest="what", required=True)
@@ -84,11 +128,18 @@ def main(argv: Sequence[str] | None = None) -> None:
     wav.add_argument("--repeats", type=int, default=5)
     wav.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     wav.add_argument("--bases", nargs="+", default=list(BASES))
+    data = sub.add_parser("data", help="frames/s of reading + preprocessing, all buffers vs a no-temporal model's")
+    data.add_argument("--size", type=int, nargs=2, default=(270, 480), metavar=("H", "W"))
+    data.add_argument("--frames", type=int, default=8)
+    data.add_argument("--repeats", type=int, default=3)
+    data.add_argument("--scale", type=float, default=2.0)
     args = parser.parse_args(argv)
 
     console = Console()
     if args.what == "wavelets":
         console.print(bench_wavelets(args.shape, args.repeats, args.device, args.bases))
+    elif args.what == "data":
+        console.print(bench_data(tuple(args.size), args.frames, args.repeats, args.scale))
 
 
 if __name__ == "__main__":

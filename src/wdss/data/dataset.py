@@ -227,8 +227,10 @@ class FrameDataset(Dataset):
         else:
             y = int(torch.randint(0, height - size + 1, ()))
             x = int(torch.randint(0, width - size + 1, ()))
+
         def crop(d: dict) -> dict:
             return {k: v[..., y : y + size, x : x + size] for k, v in d.items()}
+
         return crop(hr), crop(prev), lr
 
 

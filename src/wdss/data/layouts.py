@@ -320,9 +320,7 @@ class Sequence:
                     self._cameras[int(entry["frame"])] = matrix[:3, :3]
         return self._cameras.get(frame)
 
-    def read(
-        self, frame: int, height: int, buffers: Iterable[str], *, sanitize: bool = False
-    ) -> dict[str, np.ndarray]:
+    def read(self, frame: int, height: int, buffers: Iterable[str], *, sanitize: bool = False) -> dict[str, np.ndarray]:
         """The requested buffers of one frame at one resolution, as float32 ``(C, H, W)`` arrays.
 
         Non-finite values are an error naming file, channel, frame and count; with ``sanitize`` they are
@@ -349,7 +347,9 @@ class Sequence:
                 bad = ~np.isfinite(plane)
                 if bad.any():
                     count = int(bad.sum())
-                    where = f"sequence {self.name!r}, frame {frame}, file {self.source.describe(name)}, channel {channel}"
+                    where = (
+                        f"sequence {self.name!r}, frame {frame}, file {self.source.describe(name)}, channel {channel}"
+                    )
                     if not sanitize:
                         raise SceneError(
                             f"{where}: {count} non-finite value(s) (NaN or Inf); set data.preprocessing.sanitize=true "

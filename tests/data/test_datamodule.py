@@ -1,0 +1,197 @@
+"""Batches from scenes: need-driven opens, alignment of LR and HR, history, scales and determinism."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+import torch
+
+from wdss.data import BATCH_KEYS, FrameDataset, Preprocessing, SceneDataModule, SceneError, Sequence, point_sample
+from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf
+from wdss.data.layouts import Source
+from wdss.data.synthetic import write_sequence
+
+HR = (24, 36)
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("scenes")
+    write_sequence(root / "seq_a", layout="unreal", frames=(1, 2, 3, 4), size=HR, scales=(2, 3), cameras=True)
+    write_sequence(root / "seq_b", layout="dfasr", frames=(1, 2, 3), size=HR, scales=(2, 3), seed=1)
+    return root
+
+
+@pytest.fixture
+def opened(monkeypatch) -> list[str]:
+    """The names of every EXR file opened through a scene source."""
+    names: list[str] = []
+    original = Source.read
+
+    def counting(self, name, channels):
+        names.append(name)
+        return original(self, name, channels)
+
+    monkeypatch.setattr(Source, "read", counting)
+    return names
+
+
+def frames_of(names: list[str]) -> set[int]:
+    return {int(re.search(r"\.(\d+)\.exr$", n).group(1)) for n in names}
+
+
+def test_a_model_without_temporal_branch_opens_no_previous_frame(root, opened):
+    keys = ["lr", "gbuffer", "spatial_mask", "brdf", "target"]
+    dataset = FrameDataset([Sequence(root / "seq_a")], keys, scale=2.0)
+    assert len(dataset) == 4  # no history needed: the first frame is a sample too
+    for index in range(len(dataset)):
+        opened.clear()
+        frame = dataset[index]["frame"]
+        assert frames_of(opened) == {frame}, opened
+        # HR: all four packed files; native 12P: colour, base colour/depth, normal/specular (metallic rides with
+        # colour) for demodulation and the spatial mask -- no motion vectors anywhere.
+        assert sorted(opened) == sorted(
+            [
+                f"24P/{s}.{frame:04d}.exr"
+                for s in ("BaseColorDepth", "NormalSpecular", "PretonemapMetallic", "MV_Roughness_NOV")
+            ]
+            + [f"12P/{s}.{frame:04d}.exr" for s in ("BaseColorDepth", "NormalSpecular", "PretonemapMetallic")]
+        )
+
+
+def test_a_bare_model_reads_one_file_per_resolution(root, opened):
+    prep = Preprocessing(demodulate=False)
+    dataset = FrameDataset([Sequence(root / "seq_a")], ["lr", "target"], scale=3.0, preprocessing=prep)
+    sample = dataset[0]
+    assert sorted(opened) == ["24P/PretonemapMetallic.0001.exr", "8P/PretonemapMetallic.0001.exr"]
+    assert sample["lr"]["color"].shape == (3, 8, 12)
+
+
+def test_history_reads_the_previous_frame_and_skips_first_frames(root, opened):
+    dataset = FrameDataset([Sequence(root / "seq_a")], ["history", "temporal_mask", "target"], scale=2.0)
+    assert [frame for _, frame in dataset.items] == [2, 3, 4]
+    dataset[0]
+    assert frames_of(opened) == {1, 2}
+    keep = FrameDataset([Sequence(root / "seq_a")], ["history"], scale=2.0, first_frame="zeros")
+    assert [frame for _, frame in keep.items] == [1, 2, 3, 4]
+    assert keep[0]["prev"]["color"].abs().sum() == 0
+
+
+@pytest.mark.parametrize("sequence", ["seq_a", "seq_b"])
+def test_full_frame_batch_values(root, sequence):
+    dm = SceneDataModule(root, {"train": [sequence], "test": [sequence]}, BATCH_KEYS, test_scales=[2.0])
+    dm.setup("test")
+    batch = next(iter(dm.test_dataloader()[0]))
+    assert set(BATCH_KEYS) | {"scale", "sequence", "frame"} == set(batch)
+    for key in BATCH_KEYS:
+        assert batch[key].dtype == torch.float32 and torch.isfinite(batch[key]).all(), key
+    assert batch["target"].shape == (1, 3, *HR) and batch["lr"].shape == (1, 3, 12, 18)
+    assert batch["gbuffer"].shape == (1, 11, *HR) and batch["temporal_mask"].shape == (1, 5, *HR)
+    # The native 12P folder holds point samples of the HR frame, so lr is the demodulated point sample.
+    seq = Sequence(root / sequence)
+    frame = int(batch["frame"][0])
+    hr = {
+        k: torch.from_numpy(v)[None]
+        for k, v in seq.read(frame, 24, ["color", "base_color", "metallic", "specular"]).items()
+    }
+    lr = {k: point_sample(v, (12, 18)) for k, v in hr.items()}
+    expected = demodulate(lr["color"], safe_brdf(extranet_brdf(lr["base_color"], lr["metallic"], lr["specular"])))
+    torch.testing.assert_close(batch["lr"], expected)
+    # The emitter (black albedo, colour 5) passes through demodulation and remodulates to itself.
+    assert (batch["brdf"] == 1).any() and torch.allclose(
+        batch["target"] / batch["brdf"] * batch["brdf"], batch["target"]
+    )
+    # The synthetic content translates by the motion vectors, so the warped previous irradiance is the current
+    # irradiance wherever the history came from inside the frame.
+    current = batch["target"] / batch["brdf"]
+    inside = batch["history"].abs().sum(1) > 1e-3  # outside: 0 up to grid_sample rounding (~1e-7)
+    torch.testing.assert_close(batch["history"][:, :, inside[0]], current[:, :, inside[0]], rtol=1e-5, atol=1e-5)
+    assert inside.float().mean() > 0.9
+
+
+@pytest.mark.parametrize("scale, size", [(2.0, (12, 18)), (3.0, (8, 12)), (2.5, (10, 14)), (4.0, (6, 9))])
+def test_any_scale_gives_the_rounded_grid(root, scale, size):
+    dm = SceneDataModule(root, {"test": ["seq_a"]}, ["lr", "target"], test_scales=[scale])
+    dm.setup("test")
+    batch = next(iter(dm.test_dataloader()[0]))
+    assert batch["lr"].shape[-2:] == size and batch["scale"].tolist() == [scale]
+
+
+def test_patches_align_native_lr_with_hr(root):
+    dataset = FrameDataset([Sequence(root / "seq_a")], ["lr_color", "target"], scale=3.0, patch=12)
+    torch.manual_seed(0)
+    for index in range(len(dataset)):
+        sample = dataset[index]
+        assert sample["hr"]["color"].shape == (3, 12, 12) and sample["lr"]["color"].shape == (3, 4, 4)
+        torch.testing.assert_close(sample["lr"]["color"], point_sample(sample["hr"]["color"][None], (4, 4))[0])
+
+
+def test_arbitrary_scale_is_one_per_batch_and_varies(root):
+    dm = SceneDataModule(
+        root, {"train": ["seq_a", "seq_b"]}, ["lr", "target"], scale=[2, 4], patch_size=12, batch_size=2
+    )
+    dm.setup("fit")
+    torch.manual_seed(0)
+    scales = []
+    for _ in range(4):
+        for batch in dm.train_dataloader():
+            assert len(set(batch["scale"].tolist())) == 1
+            s = float(batch["scale"][0])
+            assert 2 <= s <= 4 and batch["lr"].shape[-1] == round(12 / s)
+            scales.append(s)
+    assert len(set(scales)) > 1
+
+
+def test_same_seed_same_batches(root):
+    def first_batch():
+        torch.manual_seed(123)
+        dm = SceneDataModule(root, {"train": ["seq_a"]}, ["target", "gbuffer"], patch_size=12, batch_size=2, seed=7)
+        dm.setup("fit")
+        return next(iter(dm.train_dataloader()))
+
+    a, b = first_batch(), first_batch()
+    assert a["frame"].tolist() == b["frame"].tolist()
+    torch.testing.assert_close(a["target"], b["target"])
+
+
+def test_flips_need_camera_metadata(root):
+    dm = SceneDataModule(root, {"train": ["seq_a"]}, ["gbuffer", "motion"], patch_size=12, batch_size=2, flips=True)
+    dm.setup("fit")
+    assert next(iter(dm.train_dataloader()))["gbuffer"].shape == (2, 11, 12, 12)
+    dm = SceneDataModule(root, {"train": ["seq_b"]}, ["gbuffer"], patch_size=12, batch_size=2, flips=True)
+    dm.setup("fit")
+    torch.manual_seed(1)  # some sample of the epoch is flipped
+    with pytest.raises(ValueError, match="needs the camera rotation"):
+        for _ in dm.train_dataloader():
+            pass
+
+
+def test_configuration_errors_are_clear(root):
+    with pytest.raises(ValueError, match=r"unknown batch keys \['albedo'\]"):
+        FrameDataset([Sequence(root / "seq_a")], ["albedo"])
+    with pytest.raises(ValueError, match="unknown split"):
+        SceneDataModule(root, {"training": ["seq_a"]}, ["target"])
+    with pytest.raises(ValueError, match="brdf must be 'extranet' or 'split_sum'"):
+        Preprocessing(brdf="lambert")
+    with pytest.raises(SceneError, match="patch size 48 is larger than the frame"):
+        FrameDataset([Sequence(root / "seq_a")], ["target"], patch=48)[0]
+    dm = SceneDataModule(root, {"train": ["seq_zzz"]}, ["target"])
+    with pytest.raises(SceneError, match="sequence 'seq_zzz' not found"):
+        dm.setup("fit")
+
+
+def test_frame_ranges_and_split_entries(root):
+    dm = SceneDataModule(
+        root, {"train": [{"name": "seq_a", "frames": [2, 4]}]}, ["target"], patch_size=None, batch_size=1
+    )
+    dm.setup("fit")
+    assert [frame for _, frame in dm.datasets["train"].items] == [2, 3]
+
+
+def test_split_sum_preprocessing_reads_roughness_and_nov(root, opened):
+    prep = Preprocessing(brdf="split_sum")
+    dataset = FrameDataset([Sequence(root / "seq_a")], ["brdf"], preprocessing=prep)
+    dataset[0]
+    assert any("MV_Roughness_NOV" in n for n in opened)

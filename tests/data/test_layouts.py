@@ -1,0 +1,159 @@
+"""Reading scenes: both layouts, folders and zips, need-driven opens, and clear errors."""
+
+from __future__ import annotations
+
+import shutil
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from wdss.data import BUFFERS, ExrError, SceneError, Sequence, discover_sequences, read_exr, write_exr
+from wdss.data.sampling import point_sample
+from wdss.data.synthetic import synthetic_frame, write_sequence
+
+HR = (24, 36)
+
+
+@pytest.fixture(scope="module", params=["unreal", "dfasr"])
+def scene(request, tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp(f"scene_{request.param}")
+    write_sequence(root / "seq", layout=request.param, frames=(1, 2, 3), size=HR, scales=(2, 3))
+    return root / "seq"
+
+
+def test_every_channel_round_trips_at_every_resolution(scene):
+    seq = Sequence(scene)
+    assert seq.resolutions == [24, 12, 8] and seq.frames == [1, 2, 3]
+    for frame in seq.frames:
+        expected = synthetic_frame(frame, *HR)
+        for height in seq.resolutions:
+            got = seq.read(frame, height, BUFFERS)
+            for name, value in got.items():
+                want = expected[name]
+                if height != HR[0]:
+                    size = (height, round(HR[1] * height / HR[0]))
+                    want = point_sample(torch.from_numpy(want)[None], size)[0].numpy()
+                assert value.dtype == np.float32 and value.shape == want.shape, name
+                np.testing.assert_array_equal(value, want, err_msg=f"{name} at {height}P frame {frame}")
+
+
+def test_a_zipped_sequence_reads_like_its_folder(scene, tmp_path):
+    archive = tmp_path / "seq.zip"
+    with zipfile.ZipFile(archive, "w") as zf:
+        for file in scene.rglob("*"):
+            zf.write(file, Path("seq") / file.relative_to(scene))  # zipped with its top folder
+    folder, zipped = Sequence(scene), Sequence(archive)
+    assert zipped.name == "seq" and zipped.resolutions == folder.resolutions and zipped.frames == folder.frames
+    for name, value in zipped.read(2, 12, ["color", "normal"]).items():
+        np.testing.assert_array_equal(value, folder.read(2, 12, [name])[name])
+
+
+def test_reads_open_only_the_files_that_hold_requested_buffers(scene):
+    seq = Sequence(scene)
+    seq.read(1, 24, ["color"])
+    assert seq.source.opens == 1
+    unreal = seq.layout.name == "unreal"
+    seq.read(1, 24, ["base_color", "depth"])  # one packed file in the unreal layout, two in dfasr
+    assert seq.source.opens == (2 if unreal else 3)
+    seq.read(1, 24, ["motion", "roughness", "nov", "metallic"])  # unreal: MV_Roughness_NOV + PretonemapMetallic
+    assert seq.source.opens == (4 if unreal else 5)
+
+
+def test_discovery_finds_folders_and_zips_and_names_missing_ones(scene):
+    root = scene.parent
+    assert [s.name for s in discover_sequences(root)] == ["seq"]
+    with pytest.raises(SceneError, match=r"sequence 'nope' not found under .* \(it holds \['seq'\]\)"):
+        discover_sequences(root, ["nope"])
+
+
+def test_layout_is_detected_or_refused(tmp_path):
+    (tmp_path / "odd").mkdir()
+    write_exr(tmp_path / "odd" / "frames" / "Color.0001.exr", {"R": np.zeros((2, 2))})
+    with pytest.raises(SceneError, match="cannot tell its layout"):
+        Sequence(tmp_path / "odd")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SceneError, match="holds no EXR files"):
+        Sequence(tmp_path / "empty")
+    with pytest.raises(SceneError, match="unknown scene layout 'ue5'"):
+        Sequence(write_sequence(tmp_path / "s", frames=(1,), size=(4, 4), scales=()), layout="ue5")
+
+
+def test_missing_file_names_sequence_frame_file_and_channels(tmp_path):
+    seq_dir = write_sequence(tmp_path / "seq", frames=(1, 2), size=(8, 8), scales=())
+    (seq_dir / "8P" / "NormalSpecular.0002.exr").unlink()
+    seq = Sequence(seq_dir)
+    seq.read(2, 8, ["color"])  # what is there still reads
+    with pytest.raises(
+        SceneError,
+        match=r"'seq', frame 2: buffer 'normal' is missing at 8P \(expected "
+        r"8P/NormalSpecular.0002.exr, channels R,G,B\)",
+    ):
+        seq.read(2, 8, ["normal"])
+
+
+def test_missing_channel_names_file_and_channel(tmp_path):
+    seq_dir = write_sequence(tmp_path / "seq", frames=(1,), size=(8, 8), scales=())
+    planes = read_exr(seq_dir / "8P" / "MV_Roughness_NOV.0001.exr")
+    del planes["A"]
+    write_exr(seq_dir / "8P" / "MV_Roughness_NOV.0001.exr", planes)
+    with pytest.raises(ExrError, match=r"MV_Roughness_NOV.0001.exr has no channel A \(it has B, G, R\)"):
+        Sequence(seq_dir).read(1, 8, ["nov"])
+
+
+def test_mismatched_sizes_name_both_files(tmp_path):
+    seq_dir = write_sequence(tmp_path / "seq", frames=(1,), size=(8, 8), scales=())
+    write_exr(seq_dir / "8P" / "BaseColorDepth.0001.exr", {c: np.zeros((8, 6)) for c in "RGBA"})
+    with pytest.raises(
+        SceneError,
+        match=r"buffers differ in size at 8P: .*PretonemapMetallic.0001.exr 8x8, .*BaseColorDepth.0001.exr 6x8",
+    ):
+        Sequence(seq_dir).read(1, 8, ["color", "depth"])
+
+
+def test_truncated_exr_is_a_clear_error(tmp_path):
+    seq_dir = write_sequence(tmp_path / "seq", frames=(1,), size=(8, 8), scales=())
+    target = seq_dir / "8P" / "PretonemapMetallic.0001.exr"
+    target.write_bytes(target.read_bytes()[:100])
+    with pytest.raises(ExrError, match=r"cannot read EXR .*PretonemapMetallic.0001.exr \(corrupt, truncated"):
+        Sequence(seq_dir).read(1, 8, ["color"])
+
+
+def test_half_channels_read_as_float32(tmp_path):
+    seq_dir = write_sequence(tmp_path / "seq", frames=(1,), size=(8, 8), scales=(), half=True)
+    color = Sequence(seq_dir).read(1, 8, ["color"])["color"]
+    assert color.dtype == np.float32
+    np.testing.assert_allclose(color, synthetic_frame(1, 8, 8)["color"], rtol=1e-3)
+
+
+def test_non_finite_values_fail_by_default_and_sanitize_counts(tmp_path):
+    seq_dir = write_sequence(tmp_path / "seq", frames=(1,), size=(8, 8), scales=())
+    path = seq_dir / "8P" / "PretonemapMetallic.0001.exr"
+    planes = read_exr(path)
+    planes["G"][0, :3] = np.nan
+    planes["G"][1, 0] = np.inf
+    write_exr(path, planes)
+    with pytest.raises(SceneError, match=r"frame 1, file .*PretonemapMetallic.0001.exr, channel G: 4 non-finite"):
+        Sequence(seq_dir).read(1, 8, ["color"])
+    seq = Sequence(seq_dir)
+    color = seq.read(1, 8, ["color"], sanitize=True)["color"]
+    assert np.isfinite(color).all() and color[1, 0, :3].tolist() == [0, 0, 0]
+    assert seq.sanitized == {"8P/PretonemapMetallic.0001.exr:G": 4}
+
+
+def test_unknown_buffer_is_refused(scene):
+    with pytest.raises(SceneError, match="unknown buffer 'albedo'"):
+        Sequence(scene).read(1, 24, ["albedo"])
+
+
+def test_copy_without_low_resolution_folders_still_reads_hr(tmp_path, scene):
+    copy = tmp_path / "hr_only"
+    shutil.copytree(scene, copy)
+    for folder in copy.iterdir():
+        if folder.is_dir() and not folder.name.endswith("24P"):
+            shutil.rmtree(folder)
+    seq = Sequence(copy)
+    assert seq.resolutions == [24]
+    assert seq.read(3, 24, ["color"])["color"].shape == (3, 24, 36)
