@@ -308,8 +308,9 @@ def build_batch(
             previous = demodulate(prev["color"], brdf_of(prev, prep)) if prep.demodulate else prev["color"]
             batch["history"] = warp_backward(previous, motion)
         if "temporal_mask" in keys:
-            stacked = torch.cat([prev[name] for name in ("depth", "base_color", "normal")], dim=1)
-            warped = dict(zip(("depth", "base_color", "normal"), warp_backward(stacked, motion).split([1, 3, 3], 1)))
+            names = ("depth", "base_color", "normal")
+            stacked = warp_backward(torch.cat([prev[name] for name in names], dim=1), motion)  # one warp for all
+            warped = dict(zip(names, stacked.split([1, 3, 3], 1), strict=True))
             batch["temporal_mask"] = temporal_mask(hr, warped)
     if "motion" in keys:
         batch["motion"] = hr["motion"]

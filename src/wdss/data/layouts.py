@@ -304,7 +304,10 @@ class Sequence:
         self._cameras: dict[int, torch.Tensor] | None = None
 
     def __repr__(self) -> str:
-        return f"Sequence({self.name!r}, layout={self.layout.name}, resolutions={self.resolutions}, frames={len(self.frames)})"
+        return (
+            f"Sequence({self.name!r}, layout={self.layout.name}, resolutions={self.resolutions}, "
+            f"frames={len(self.frames)})"
+        )
 
     def has(self, buffer: str, height: int, frame: int | None = None) -> bool:
         return self.layout.locate(buffer, height, self.frames[0] if frame is None else frame, self._index) is not None
