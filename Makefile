@@ -42,8 +42,9 @@ format: setup ## ruff: fix what can be fixed and format
 train: setup ## a short default training run, tracked in MLflow
 	$(PY) -m wdss.train
 
-bench: setup ## benchmarks: wavelet transforms against ptwt
+bench: setup ## benchmarks: wavelet transforms against ptwt, data loading
 	$(PY) -m wdss.bench wavelets
+	$(PY) -m wdss.bench data
 
 clean: ## remove caches (keeps .venv, data and mlflow.db)
 	rm -rf .pytest_cache .ruff_cache src/*.egg-info

@@ -195,3 +195,24 @@ def test_split_sum_preprocessing_reads_roughness_and_nov(root, opened):
     dataset = FrameDataset([Sequence(root / "seq_a")], ["brdf"], preprocessing=prep)
     dataset[0]
     assert any("MV_Roughness_NOV" in n for n in opened)
+
+
+def test_native_lr_of_the_wrong_width_is_a_clear_error(tmp_path):
+    seq_dir = write_sequence(tmp_path / "seq", frames=(1,), size=(8, 8), scales=(2,))
+    from wdss.data import write_exr
+
+    write_exr(seq_dir / "4P" / "PretonemapMetallic.0001.exr", {c: torch.zeros(4, 5).numpy() for c in "RGBA"})
+    dataset = FrameDataset([Sequence(seq_dir)], ["lr_color", "target"], scale=2.0)
+    with pytest.raises(SceneError, match=r"frame 1: the 4P frame is 5x4, but 8x8 at scale 2.0 needs 4x4"):
+        dataset[0]
+
+
+def test_worker_processes_read_zipped_sequences(root, tmp_path):
+    import shutil
+
+    shutil.make_archive(str(tmp_path / "seq_a"), "zip", root / "seq_a")
+    dm = SceneDataModule(tmp_path, {"train": ["seq_a"]}, ["lr", "history", "target"], patch_size=12, batch_size=2,
+                         num_workers=2)
+    dm.setup("fit")
+    batches = list(dm.train_dataloader())
+    assert len(batches) == 1 and batches[0]["history"].shape == (2, 3, 12, 12)

@@ -190,6 +190,14 @@ class FrameDataset(Dataset):
         hr_need = set(self.need["hr"]) | (set() if lr_height else self.need["lr"])
         hr = self._read(seq, frame, seq.hr, hr_need) if hr_need else {}
         lr = self._read(seq, frame, lr_height, self.need["lr"]) if lr_height else {}
+        if lr and hr:
+            hr_shape, lr_shape = next(iter(hr.values())).shape[-2:], next(iter(lr.values())).shape[-2:]
+            if tuple(lr_shape) != lr_size(*hr_shape, float(self.scale)):
+                raise SceneError(
+                    f"sequence {seq.name!r}, frame {frame}: the {lr_height}P frame is {lr_shape[1]}x{lr_shape[0]}, "
+                    f"but {hr_shape[1]}x{hr_shape[0]} at scale {self.scale} needs "
+                    f"{lr_size(*hr_shape, float(self.scale))[1]}x{lr_size(*hr_shape, float(self.scale))[0]}"
+                )
         prev: dict[str, Tensor] = {}
         has_history = frame - 1 in set(seq.frames)
         if self.need["prev"]:
