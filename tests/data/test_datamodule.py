@@ -211,8 +211,9 @@ def test_worker_processes_read_zipped_sequences(root, tmp_path):
     import shutil
 
     shutil.make_archive(str(tmp_path / "seq_a"), "zip", root / "seq_a")
-    dm = SceneDataModule(tmp_path, {"train": ["seq_a"]}, ["lr", "history", "target"], patch_size=12, batch_size=2,
-                         num_workers=2)
+    dm = SceneDataModule(
+        tmp_path, {"train": ["seq_a"]}, ["lr", "history", "target"], patch_size=12, batch_size=2, num_workers=2
+    )
     dm.setup("fit")
     batches = list(dm.train_dataloader())
     assert len(batches) == 1 and batches[0]["history"].shape == (2, 3, 12, 12)
