@@ -9,7 +9,7 @@ PY := $(VENV)/bin/python
 PIP_INSTALL := $(PY) -m pip install --disable-pip-version-check -q -c constraints.txt
 export MLFLOW_DISABLE_TELEMETRY ?= true
 
-.PHONY: help setup setup-render test test-fast lint format train bench clean
+.PHONY: help setup setup-render test test-fast lint format train bench data clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | sort | \
@@ -22,10 +22,16 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 	$(PIP_INSTALL) -e '.[dev]'
 	touch $@
 
-setup-render: setup ## also install Blender's bpy (the `render` extra, ~400 MB)
-	$(PIP_INSTALL) -e '.[dev,render]'
+setup-render: $(VENV)/.installed-render ## also install Blender's bpy (the `render` extra, ~400 MB)
 
-test: setup ## run the whole test suite, slow tests included
+$(VENV)/.installed-render: $(VENV)/.installed
+	$(PIP_INSTALL) -e '.[dev,render]'
+	touch $@
+
+data: setup-render ## render the default dataset (data/mini, a few minutes) ahead of training
+	$(PY) -m wdss.render -cn mini
+
+test: setup-render ## run the whole test suite, slow (rendering) tests included
 	$(PY) -m pytest
 
 test-fast: setup ## run the tests not marked slow

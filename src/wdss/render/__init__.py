@@ -1,0 +1,9 @@
+"""Procedural datasets rendered with Blender Cycles (``bpy``, the ``render`` extra), in the authors' layout.
+
+``python -m wdss.render`` (config ``conf/render/``) renders sequences; :func:`render_preset` renders a named
+preset, which is how ``conf/data/mini.yaml`` makes the default dataset on first use.
+"""
+
+from wdss.render.sequence import render_preset, render_sequence, render_sequences
+
+__all__ = ["render_preset", "render_sequence", "render_sequences"]

@@ -5,7 +5,8 @@ Conventions (REFERENCE.md section 5, verified on bpy 5.0.1):
 * Combined: linear HDR radiance -> ``color``.
 * Depth.Z: planar camera depth, 1e10 on the background -> ``depth`` with the background mapped to 0 (as the
   authors' loader does with depth > 100).
-* Normal: world-space shading normal -> ``normal`` (0 on the background).
+* Normal: world-space shading normal -> ``normal``, renormalised (samples straddling a silhouette average),
+  0 on the background.
 * Vector.XY: previous minus current position in pixels of the rendered resolution, x right, y up ->
   ``motion`` = current minus previous, in high-resolution pixels (the authors' convention), filled on the
   background from the two cameras (directions at infinity move with the camera rotation only).
@@ -37,9 +38,7 @@ def _pixel_rays(lens: float, width: int, height: int) -> np.ndarray:
     return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
 
 
-def background_motion(
-    current: np.ndarray, previous: np.ndarray, lens: float, width: int, height: int
-) -> np.ndarray:
+def background_motion(current: np.ndarray, previous: np.ndarray, lens: float, width: int, height: int) -> np.ndarray:
     """Motion (current minus previous, pixels, y up) of directions at infinity, ``(2, H, W)``.
 
     ``current``/``previous``: 4x4 camera-to-world matrices. Only the rotation matters at infinity.
@@ -76,6 +75,9 @@ def to_buffers(
     _, height, width = depth.shape
     surface = depth[0] < BACKGROUND_DEPTH
     normal = np.where(surface, passes["Normal"][:3], 0.0)
+    # Samples of one pixel that straddle a silhouette average their normals; renormalise to unit length.
+    length = np.linalg.norm(normal, axis=0, keepdims=True)
+    normal = np.where(length > 1e-6, normal / np.maximum(length, 1e-6), 0.0)
     to_camera = camera[:3, 3].reshape(3, 1, 1) - passes["Position"][:3]
     to_camera /= np.maximum(np.linalg.norm(to_camera, axis=0, keepdims=True), 1e-12)
     nov = np.where(surface, np.clip((normal * to_camera).sum(0, keepdims=True), 0.0, 1.0), 0.0)

@@ -46,8 +46,13 @@ def preview(sequence_dir: str | Path, frame: int | None = None, out: str | Path 
         ax.axis("off")
     for ax, (title, image) in zip(np.ravel(axes), panels.items(), strict=False):
         array = image.numpy()
-        ax.imshow(array[0] if array.shape[0] == 1 else array.transpose(1, 2, 0), cmap="gray", vmin=0, vmax=1,
-                  interpolation="nearest")
+        ax.imshow(
+            array[0] if array.shape[0] == 1 else array.transpose(1, 2, 0),
+            cmap="gray",
+            vmin=0,
+            vmax=1,
+            interpolation="nearest",
+        )
         ax.set_title(title, fontsize=9)
     fig.suptitle(f"{seq.name}, frame {frame}", fontsize=10)
     fig.tight_layout()

@@ -27,9 +27,9 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from wdss.data.exr import write_exr
 from wdss.data.layouts import UnrealLayout
 from wdss.data.sampling import lr_size, point_sample
-from wdss.render.spec import camera_pose, intrinsics, random_scene
+from wdss.render.spec import SceneSpec, camera_pose, intrinsics, random_scene
 
-__all__ = ["frame_files", "render_sequence", "render_sequences"]
+__all__ = ["frame_files", "render_preset", "render_sequence", "render_sequences"]
 
 log = logging.getLogger(__name__)
 
@@ -75,8 +75,12 @@ def render_sequence(
     objects: tuple[int, int] = (10, 40),
     compression: str = "zip",
     progress: Progress | None = None,
+    spec: SceneSpec | None = None,
 ) -> Path:
-    """Render one sequence into ``out_dir/name`` and return that folder. ``resolution`` is (width, height)."""
+    """Render one sequence into ``out_dir/name`` and return that folder. ``resolution`` is (width, height).
+
+    The scene is ``random_scene(seed)`` unless a ``spec`` is given.
+    """
     from wdss.render.convert import to_buffers
 
     if lr_mode not in ("downsample", "native"):
@@ -89,7 +93,7 @@ def render_sequence(
     folder = Path(out_dir) / name
     folder.mkdir(parents=True, exist_ok=True)
     heights = [height] + [height // s for s in scales]
-    spec = random_scene(seed, min_objects=objects[0], max_objects=objects[1])
+    spec = spec or random_scene(seed, min_objects=objects[0], max_objects=objects[1])
     lens = spec.camera.lens
     settings = {
         "frames": frames,
@@ -115,7 +119,11 @@ def render_sequence(
         "seed": seed,
         "layout": "unreal",
         "settings": settings,
-        "intrinsics": {"lens_mm": lens, "sensor_width_mm": 36.0, "fx_fy_cx_cy": intrinsics(lens, width, height).tolist()},
+        "intrinsics": {
+            "lens_mm": lens,
+            "sensor_width_mm": 36.0,
+            "fx_fy_cx_cy": intrinsics(lens, width, height).tolist(),
+        },
         "conventions": {
             "camera_to_world": "4x4, Blender camera: looks down -z, y up",
             "motion": "HR pixels, current minus previous screen position, y up",
@@ -187,3 +195,19 @@ class _RateProgress(Progress):
         task = self._tasks[task_id]
         speed = task.speed
         self.update(task_id, rate=f"{speed:.2f} frames/s" if speed else "")
+
+
+def render_preset(out_dir: str | Path, name: str = "mini") -> list[Path]:
+    """Render the sequences of ``conf/render/<name>.yaml`` into ``out_dir`` (a DataModule's ``prepare``)."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from wdss.paths import CONF_DIR
+
+    with initialize_config_dir(config_dir=str(CONF_DIR / "render"), version_base="1.3"):
+        cfg = compose(config_name=name)
+    settings = OmegaConf.to_container(cfg, resolve=True)
+    for key in ("out_dir", "preview", "preview_frame"):
+        settings.pop(key, None)
+    print(f"wdss: rendering the {name!r} dataset into {out_dir} (Blender Cycles on the CPU; resumable)")
+    return render_sequences(out_dir, settings.pop("sequences"), **settings)
