@@ -217,3 +217,32 @@ def test_worker_processes_read_zipped_sequences(root, tmp_path):
     dm.setup("fit")
     batches = list(dm.train_dataloader())
     assert len(batches) == 1 and batches[0]["history"].shape == (2, 3, 12, 12)
+
+
+def test_prepare_data_makes_a_missing_root_once(tmp_path):
+    calls = []
+
+    def prepare(root):
+        calls.append(root)
+        write_sequence(root / "seq_a", frames=(1, 2), size=(8, 8), scales=())
+
+    dm = SceneDataModule(tmp_path / "made", {"train": ["seq_a"]}, ["target"], patch_size=None, prepare=prepare)
+    dm.prepare_data()
+    dm.prepare_data()  # the root exists now: nothing to do
+    assert calls == [tmp_path / "made"]
+    dm.setup("fit")
+    assert len(dm.datasets["train"]) == 2
+
+
+def test_the_default_data_config_instantiates():
+    from hydra import compose, initialize_config_dir
+    from hydra.utils import instantiate
+
+    from wdss.paths import CONF_DIR
+    from wdss.render import render_preset
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose(overrides=["+data=mini", "+data.inputs=[lr,target]"])
+    dm = instantiate(cfg.data)
+    assert isinstance(dm, SceneDataModule) and dm.inputs == ("lr", "target") and dm.scale == (2.0, 4.0)
+    assert dm.prepare.func is render_preset and dm.prepare.keywords == {"name": "mini"}

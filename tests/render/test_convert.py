@@ -106,3 +106,12 @@ def test_the_data_module_reads_the_rendered_fixture():
         assert batch["lr"].shape[-2:] == size
         for key in BATCH_KEYS:
             assert torch.isfinite(batch[key]).all(), key
+
+
+def test_render_sequences_lets_a_sequence_override_shared_settings(monkeypatch, tmp_path):
+    import wdss.render.sequence as sequence
+
+    calls = []
+    monkeypatch.setattr(sequence, "render_sequence", lambda out, name, seed, **kw: calls.append((name, seed, kw)))
+    sequence.render_sequences(tmp_path, [{"name": "a", "seed": 1}, {"name": "b", "seed": 2, "frames": 5}], frames=9)
+    assert [(name, seed, kw["frames"]) for name, seed, kw in calls] == [("a", 1, 9), ("b", 2, 5)]

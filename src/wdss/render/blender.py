@@ -5,8 +5,10 @@ Importing this module needs the ``render`` extra (``pip install 'wdss[render]'``
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -226,9 +228,25 @@ class BlenderScene:
             cycles.denoising_prefilter = "NONE" if min(width, height) < 200 else "ACCURATE"
         with tempfile.TemporaryDirectory() as tmp:
             render.filepath = str(Path(tmp) / "frame.exr")
-            bpy.ops.render.render(write_still=True)
+            with _quiet():
+                bpy.ops.render.render(write_still=True)
             planes = read_exr(render.filepath)
         return _group_passes(planes)
+
+
+@contextlib.contextmanager
+def _quiet():
+    """Silence Blender's per-tile log lines (written by C code to the process's stdout) during a render."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
 
 
 def _group_passes(planes: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -43,13 +43,23 @@ def frame_files(folder: Path, frame: int, heights: Iterable[int]) -> list[Path]:
     return [folder / f"{h}P" / f"{stem}.{frame:04d}.exr" for h in heights for stem in _stems()]
 
 
-def write_unreal_frame(folder: Path, frame: int, buffers: Mapping[str, np.ndarray], compression: str) -> None:
+# Stored as 16-bit half when ``half`` is on: everything but depth and motion, which need float32's range and
+# sub-pixel precision (Unreal's own captures are half as well).
+HALF_BUFFERS = ("color", "base_color", "normal", "specular", "metallic", "roughness", "nov")
+
+
+def write_unreal_frame(
+    folder: Path, frame: int, buffers: Mapping[str, np.ndarray], compression: str, half: bool = False
+) -> None:
     files: dict[str, dict[str, np.ndarray]] = {}
+    halves: dict[str, list[str]] = {}
     for buffer, slot in UnrealLayout.SLOTS.items():
         for channel, plane in zip(slot.channels, buffers[buffer], strict=True):
             files.setdefault(slot.stem, {})[channel] = plane
+            if half and buffer in HALF_BUFFERS:
+                halves.setdefault(slot.stem, []).append(channel)
     for stem, channels in files.items():
-        write_exr(folder / f"{stem}.{frame:04d}.exr", channels, compression=compression)
+        write_exr(folder / f"{stem}.{frame:04d}.exr", channels, compression=compression, half=halves.get(stem, []))
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -74,6 +84,7 @@ def render_sequence(
     threads: int = 0,
     objects: tuple[int, int] = (10, 40),
     compression: str = "zip",
+    half: bool = True,
     progress: Progress | None = None,
     spec: SceneSpec | None = None,
 ) -> Path:
@@ -105,6 +116,7 @@ def render_sequence(
         "denoise": denoise,
         "filter_width": filter_width,
         "compression": compression,
+        "half": half,
         "blender": "bpy 5.0.1, Cycles CPU",
     }
     sidecar = folder / "sequence.json"
@@ -146,7 +158,7 @@ def render_sequence(
         camera = camera_pose(spec.camera, frame)
         previous = camera_pose(spec.camera, frame - 1)
         hr = to_buffers(scene.render(frame, width, height), camera=camera, previous_camera=previous, lens=lens)
-        write_unreal_frame(folder / f"{height}P", frame, hr, compression)
+        write_unreal_frame(folder / f"{height}P", frame, hr, compression, half)
         for s in scales:
             size = lr_size(height, width, s)
             if lr_mode == "downsample":
@@ -154,7 +166,7 @@ def render_sequence(
             else:
                 passes = scene.render(frame, size[1], size[0], samples=lr_samples)
                 lr = to_buffers(passes, camera=camera, previous_camera=previous, lens=lens, motion_scale=float(s))
-            write_unreal_frame(folder / f"{size[0]}P", frame, lr, compression)
+            write_unreal_frame(folder / f"{size[0]}P", frame, lr, compression, half)
         meta["render_seconds"][str(frame)] = round(time.perf_counter() - start, 3)
         _write_json(sidecar, meta)
         if progress is not None:
@@ -178,7 +190,7 @@ def render_sequences(out_dir: str | Path, sequences: Iterable[Mapping[str, Any]]
         for seq in sequences:
             overrides = {k: v for k, v in seq.items() if k not in ("name", "seed")}  # e.g. per-sequence frames
             folders.append(
-                render_sequence(out_dir, seq["name"], int(seq["seed"]), **settings, **overrides, progress=progress)
+                render_sequence(out_dir, seq["name"], int(seq["seed"]), **{**settings, **overrides}, progress=progress)
             )
         return folders
 

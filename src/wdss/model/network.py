@@ -1,0 +1,261 @@
+"""The WDSS network (REFERENCE.md section 2): extractors -> fusion + Fourier INR -> subbands -> synthesis.
+
+A pure ``nn.Module``. Inputs are the batch tensors of :mod:`wdss.data` (``lr``, ``gbuffer``,
+``spatial_mask``, ``history``, ``temporal_mask``, ``scale``); the output is high-resolution irradiance
+(clamped at 0) and, for wavelet heads, the predicted coefficients (band-major ``[LL, LH, HL, HH] x RGB``).
+
+Grids: every input is ``pixel_unshuffle``d by 2, so features live on half-resolution grids: the LR/2 grid
+of ``h/2 x w/2`` cells and the HR/2 grid of ``H/2 x W/2`` cells, both spanning the frame (cell centres in
+``[-1, 1]``, LIIF's convention, matching :mod:`wdss.data.sampling`). Each HR/2 cell takes the amplitude of
+its nearest LR/2 cell and knows its offset ``delta`` from that cell's centre, in LR/2 cells (``|delta| <=
+1``). Odd frame sizes are padded to even (replicating the border) and cropped back.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from wdss.model.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3
+from wdss.wavelets import WaveletTransform
+
+__all__ = ["HEADS", "WDSSNet"]
+
+HEADS = ("shared_inr", "multi_inr", "fusion_ll")
+GBUFFER_CHANNELS = 11  # wdss.data.GBUFFER_STACK
+RGB = 3
+
+
+def _mlp(cin: int, width: int, depth: int, cout: int, final_relu: bool) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i in range(depth):
+        layers += [nn.Conv2d(cin if i == 0 else width, width, 1), nn.ReLU()]
+    layers.append(nn.Conv2d(width if depth else cin, cout, 1))
+    if final_relu:
+        layers.append(nn.ReLU())
+    return nn.Sequential(*layers)
+
+
+class LRExtractor(nn.Module):
+    """3x3 convolutions with ReLU on the unshuffled LR irradiance; output split fusion / INR amplitude."""
+
+    def __init__(self, widths: Sequence[int]) -> None:
+        super().__init__()
+        chans = [4 * RGB, *widths]
+        self.body = nn.Sequential(*[m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())])
+        self.split = widths[-1] // 2
+
+    def forward(self, x: Tensor) -> tuple[Tensor, Tensor]:
+        y = self.body(x)
+        return y[:, : self.split], y[:, self.split :]
+
+
+class GBufferExtractor(nn.Module):
+    """DFASR's encoder: conv + block, then two dilated convs + blocks; output split fusion / INR frequency."""
+
+    def __init__(self, cin: int, width: int, block: str = "double_residual") -> None:
+        super().__init__()
+        if block not in ("double_residual", "rir"):
+            raise ValueError(f"model.gbuffer_block must be 'double_residual' or 'rir', got {block!r}")
+        make = DoubleResidual if block == "double_residual" else RIRBlock
+        self.body = nn.Sequential(
+            conv3x3(cin, width), nn.ReLU(), make(width),
+            conv3x3(width, width, dilation=2), nn.ReLU(), make(width),
+            conv3x3(width, width, dilation=2), nn.ReLU(), make(width),
+        )  # fmt: skip
+        self.split = width // 2
+
+    def forward(self, x: Tensor) -> tuple[Tensor, Tensor]:
+        y = self.body(x)
+        return y[:, : self.split], y[:, self.split :]
+
+
+class TemporalExtractor(nn.Module):
+    """Lightweight gated convolutions with ReLU between, on the unshuffled (history, temporal mask)."""
+
+    def __init__(self, cin: int, widths: Sequence[int]) -> None:
+        super().__init__()
+        chans = [cin, *widths]
+        self.layers = nn.ModuleList(GatedConv(a, b) for a, b in zip(chans, chans[1:], strict=False))
+
+    def forward(self, x: Tensor) -> Tensor:
+        for i, layer in enumerate(self.layers):
+            x = layer(x)
+            if i < len(self.layers) - 1:
+                x = F.relu(x)
+        return x
+
+
+def cell_grid(hr: int, lr: int, device: torch.device, dtype: torch.dtype) -> tuple[Tensor, Tensor]:
+    """For ``hr`` HR/2 cells and ``lr`` LR/2 cells spanning the same extent along one axis: the index of each
+    HR/2 cell's nearest LR/2 cell and the offset from its centre in LR/2 cells (in ``[-1, 1]``)."""
+    coord = (2 * torch.arange(hr, device=device, dtype=torch.float64) + 1) / hr - 1  # cell centres in [-1, 1]
+    index = ((coord + 1) / 2 * lr).floor().clamp(0, lr - 1)
+    centre = (2 * index + 1) / lr - 1
+    return index.long(), ((coord - centre) * lr).to(dtype)
+
+
+class FourierINR(nn.Module):
+    """Fourier-mapped implicit representation evaluated at every HR/2 cell.
+
+    Amplitude from LR features (nearest LR/2 cell), frequencies from G-buffer features (``pairs`` 2-vectors),
+    phase from ``1/s``; ``feature = A * [cos(pi theta), sin(pi theta)]`` with ``theta = F . delta + P``,
+    then 1x1 MLP(s) and a 3x3 exit convolution.
+    """
+
+    def __init__(
+        self,
+        lr_channels: int,
+        gb_channels: int,
+        width: int,
+        mlp_width: int,
+        mlp_depth: int,
+        out_channels: int,
+        groups: int = 1,
+        group_width: int = 32,
+        final_relu: bool = True,
+    ) -> None:
+        super().__init__()
+        if width % 2:
+            raise ValueError(f"model.inr_width must be even (cos and sin halves), got {width}")
+        self.pairs = width // 2
+        self.amplitude = conv3x3(lr_channels, width)
+        self.frequency = conv3x3(gb_channels, 2 * self.pairs)
+        self.phase = nn.Linear(1, self.pairs)
+        if out_channels % groups:
+            raise ValueError(f"INR output {out_channels} does not split into {groups} subbands")
+        if groups == 1:
+            self.mlps = nn.ModuleList([_mlp(width, mlp_width, mlp_depth, out_channels, final_relu)])
+        else:  # one MLP per subband, sharing the Fourier mapping
+            self.mlps = nn.ModuleList(
+                _mlp(width, group_width, mlp_depth, out_channels // groups, final_relu) for _ in range(groups)
+            )
+        self.exit = conv3x3(out_channels, out_channels)
+
+    def forward(self, lr_feature: Tensor, gb_feature: Tensor, scale: Tensor) -> Tensor:
+        n, _, hh, wh = gb_feature.shape
+        hl, wl = lr_feature.shape[-2:]
+        rows, dy = cell_grid(hh, hl, gb_feature.device, gb_feature.dtype)
+        cols, dx = cell_grid(wh, wl, gb_feature.device, gb_feature.dtype)
+        amplitude = self.amplitude(lr_feature).index_select(-2, rows).index_select(-1, cols)
+        frequency = self.frequency(gb_feature).view(n, self.pairs, 2, hh, wh)
+        phase = self.phase((1.0 / scale).view(n, 1).to(gb_feature.dtype)).view(n, self.pairs, 1, 1)
+        theta = frequency[:, :, 0] * dy.view(1, 1, hh, 1) + frequency[:, :, 1] * dx.view(1, 1, 1, wh) + phase
+        feature = amplitude * torch.cat([torch.cos(math.pi * theta), torch.sin(math.pi * theta)], dim=1)
+        out = torch.cat([mlp(feature) for mlp in self.mlps], dim=1)
+        return self.exit(out)
+
+
+class WDSSNet(nn.Module):
+    """The WDSS super-resolution network for one transform x basis x head x temporal choice.
+
+    ``transform``: ``none | dwt | swt``; ``basis``: an orthogonal PyWavelets basis; ``head``:
+    ``shared_inr`` (fusion + INR summed), ``multi_inr`` (one INR MLP per subband), ``fusion_ll`` (fusion
+    predicts LL, the INR the details); ``temporal``: whether the temporal branch exists. Widths default to
+    the paper's (~0.57 M parameters with the SWT head).
+    """
+
+    def __init__(
+        self,
+        transform: str = "swt",
+        basis: str = "haar",
+        head: str = "shared_inr",
+        temporal: bool = True,
+        *,
+        lr_widths: Sequence[int] = (32, 48, 48, 64),
+        gbuffer_width: int = 64,
+        gbuffer_block: str = "double_residual",
+        temporal_widths: Sequence[int] = (32, 32, 16),
+        fusion_widths: Sequence[int] = (64, 48),
+        inr_width: int = 64,
+        mlp_width: int = 64,
+        mlp_depth: int = 3,
+        multi_inr_width: int = 32,
+        final_relu: bool = True,
+        input_log: bool = True,
+    ) -> None:
+        super().__init__()
+        if head not in HEADS:
+            raise ValueError(f"model.head must be one of {', '.join(HEADS)}, got {head!r}")
+        if head != "shared_inr" and transform == "none":
+            raise ValueError(
+                f"head={head} needs wavelet subbands, but transform=none has none: use transform=dwt or swt"
+            )
+        self.transform, self.basis, self.head, self.temporal = transform, basis, head, temporal
+        self.input_log = input_log
+        self.wavelet = WaveletTransform(transform, basis)
+        # Channels on the HR/2 grid before the head: SWT subbands are full resolution (4 phases each).
+        self.coeff_channels = 4 * RGB  # none: RGB x 4 phases; dwt: 4 bands x RGB
+        self.half_channels = 4 * 4 * RGB if transform == "swt" else 4 * RGB
+        self.lr = LRExtractor(lr_widths)
+        self.gbuffer = GBufferExtractor(4 * (GBUFFER_CHANNELS + 1), gbuffer_width, gbuffer_block)
+        self.temporal_branch = TemporalExtractor(4 * (RGB + 5), temporal_widths) if temporal else None
+        ll = self.half_channels // 4  # LL is the first quarter of band-major channels
+        fusion_out = ll if head == "fusion_ll" else self.half_channels
+        inr_out = self.half_channels - ll if head == "fusion_ll" else self.half_channels
+        fusion_in = self.lr.split + self.gbuffer.split + (temporal_widths[-1] if temporal else 0)
+        chans = [fusion_in, *fusion_widths]
+        layers: list[nn.Module] = [m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())]
+        self.fusion = nn.Sequential(*layers, conv3x3(chans[-1], fusion_out))
+        groups = 4 if head == "multi_inr" else 1
+        self.inr = FourierINR(
+            lr_widths[-1] - self.lr.split, gbuffer_width - self.gbuffer.split, inr_width, mlp_width, mlp_depth,
+            inr_out, groups, multi_inr_width, final_relu,
+        )  # fmt: skip
+        # Exit convolution: on RGB at H (none), on the DWT bands at H/2, on the SWT subbands at H.
+        exit_channels = RGB if transform == "none" else self.coeff_channels
+        self.exit = conv3x3(exit_channels, exit_channels)
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The batch keys this network consumes (the data side reads exactly what these need)."""
+        keys = ("lr", "gbuffer", "spatial_mask")
+        return keys + (("history", "temporal_mask") if self.temporal else ())
+
+    def _to_input(self, x: Tensor) -> Tensor:
+        return torch.log1p(x.clamp_min(0)) if self.input_log else x
+
+    def forward(
+        self,
+        lr: Tensor,
+        gbuffer: Tensor,
+        spatial_mask: Tensor,
+        scale: Tensor,
+        history: Tensor | None = None,
+        temporal_mask: Tensor | None = None,
+    ) -> dict[str, Tensor | None]:
+        height, width = gbuffer.shape[-2:]
+        pad_hr = (0, width % 2, 0, height % 2)
+        pad_lr = (0, lr.shape[-1] % 2, 0, lr.shape[-2] % 2)
+        lr_in = F.pixel_unshuffle(F.pad(self._to_input(lr), pad_lr, mode="replicate"), 2)
+        gb_in = F.pixel_unshuffle(F.pad(torch.cat([gbuffer, spatial_mask], 1), pad_hr, mode="replicate"), 2)
+        lr_fusion, lr_inr = self.lr(lr_in)
+        gb_fusion, gb_inr = self.gbuffer(gb_in)
+        half = gb_in.shape[-2:]
+        parts = [F.interpolate(lr_fusion, size=half, mode="bilinear", align_corners=False), gb_fusion]
+        if self.temporal_branch is not None:
+            if history is None or temporal_mask is None:
+                raise ValueError("this network has a temporal branch: it needs history and temporal_mask")
+            t_in = torch.cat([self._to_input(history), temporal_mask], 1)
+            parts.append(self.temporal_branch(F.pixel_unshuffle(F.pad(t_in, pad_hr, mode="replicate"), 2)))
+        fusion = self.fusion(torch.cat(parts, 1))
+        inr = self.inr(lr_inr, gb_inr, scale)
+        merged = torch.cat([fusion, inr], 1) if self.head == "fusion_ll" else fusion + inr
+        coefficients: Tensor | None
+        if self.transform == "none":
+            image = self.exit(F.pixel_shuffle(merged, 2))
+            coefficients = None
+        elif self.transform == "dwt":
+            coefficients = self.exit(merged)
+            image = self.wavelet.synthesis(coefficients)
+        else:
+            coefficients = self.exit(F.pixel_shuffle(merged, 2))
+            image = self.wavelet.synthesis(coefficients)
+        image = image[..., :height, :width]
+        if coefficients is not None and self.transform == "swt":
+            coefficients = coefficients[..., :height, :width]
+        return {"irradiance": image.clamp_min(0.0), "coefficients": coefficients}
