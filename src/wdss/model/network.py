@@ -46,7 +46,9 @@ class LRExtractor(nn.Module):
     def __init__(self, widths: Sequence[int]) -> None:
         super().__init__()
         chans = [4 * RGB, *widths]
-        self.body = nn.Sequential(*[m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())])
+        self.body = nn.Sequential(
+            *[m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())]
+        )
         self.split = widths[-1] // 2
 
     def forward(self, x: Tensor) -> tuple[Tensor, Tensor]:
@@ -199,7 +201,9 @@ class WDSSNet(nn.Module):
         inr_out = self.half_channels - ll if head == "fusion_ll" else self.half_channels
         fusion_in = self.lr.split + self.gbuffer.split + (temporal_widths[-1] if temporal else 0)
         chans = [fusion_in, *fusion_widths]
-        layers: list[nn.Module] = [m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())]
+        layers: list[nn.Module] = [
+            m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())
+        ]
         self.fusion = nn.Sequential(*layers, conv3x3(chans[-1], fusion_out))
         groups = 4 if head == "multi_inr" else 1
         self.inr = FourierINR(

@@ -1,0 +1,220 @@
+"""The LightningModule: a network (or baseline) -> remodulation -> loss, metrics per scale, logged images.
+
+The module is built from plain config mappings (``_target_`` dicts) for the network, optimiser and
+scheduler, and stores them as hyper-parameters, so a checkpoint alone rebuilds the model:
+``SuperResolutionModule.load_from_checkpoint(path, weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import lightning as L
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+from torch import Tensor, nn
+
+from wdss.data.tonemap import tonemap
+from wdss.model.losses import WDSSLoss
+from wdss.model.metrics import LPIPS, ImageMetrics
+
+__all__ = ["SuperResolutionModule"]
+
+
+def _plain(config: Any) -> Any:
+    return OmegaConf.to_container(config, resolve=True) if isinstance(config, DictConfig) else config
+
+
+class SuperResolutionModule(L.LightningModule):
+    """Train and evaluate one super-resolution model.
+
+    ``net``: a ``_target_`` mapping of a network with an ``inputs`` property and a forward returning
+    ``{"irradiance", "coefficients"}`` (:class:`~wdss.model.network.WDSSNet`, a baseline) or such a module.
+    ``loss_weights``: see :class:`~wdss.model.losses.WDSSLoss`. ``optimizer``/``scheduler``: ``_partial_``
+    ``_target_`` mappings. ``lpips``: ``{"backbone": path, "linear": path}`` of local weight files, or None.
+    """
+
+    def __init__(
+        self,
+        net: Mapping[str, Any] | nn.Module,
+        loss_weights: Mapping[str, float] | None = None,
+        optimizer: Mapping[str, Any] | None = None,
+        scheduler: Mapping[str, Any] | None = None,
+        tonemap_name: str = "hable",
+        flip: bool = True,
+        lpips: Mapping[str, str] | None = None,
+        image_every_n_epochs: int = 1,
+        trainable: bool = True,
+    ) -> None:
+        super().__init__()
+        # Plain containers only: checkpoints then load with weights_only=True and rebuild the network.
+        hparams = {
+            "loss_weights": dict(_plain(loss_weights) or {"l1": 1.0}),
+            "optimizer": _plain(optimizer) or {"_target_": "torch.optim.Adam", "_partial_": True, "lr": 1e-4},
+            "scheduler": _plain(scheduler),
+            "tonemap_name": tonemap_name,
+            "flip": flip,
+            "lpips": _plain(lpips),
+            "image_every_n_epochs": image_every_n_epochs,
+            "trainable": trainable,
+        }
+        if isinstance(net, nn.Module):
+            self.net = net
+        else:
+            hparams["net"] = _plain(net)
+            self.net = instantiate(hparams["net"])
+        self.save_hyperparameters(hparams)
+        lpips_model = LPIPS(lpips["backbone"], lpips["linear"]) if lpips else None
+        self.criterion = WDSSLoss(hparams["loss_weights"], lpips=lpips_model)
+        self.metrics = ImageMetrics(tonemap_name, flip=flip, lpips=lpips_model)
+        self.optimizer_config = hparams["optimizer"]
+        self.scheduler_config = hparams["scheduler"]
+        self.trainable = trainable and any(p.requires_grad for p in self.net.parameters())
+
+    # ------------------------------------------------------------------------------------------ model
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """Batch keys to ask the data for: the network's, the BRDF, the target and (for masked L1) the mask."""
+        keys = set(self.net.inputs) | {"brdf", "target"}
+        if self.criterion.weights.get("masked_l1"):
+            keys.add("spatial_mask")
+        return tuple(sorted(keys))
+
+    def forward(self, batch: Mapping[str, Any]) -> dict[str, Tensor | None]:
+        wanted = {k: batch[k] for k in (*self.net.inputs, "scale", "brdf") if k in batch}
+        if not hasattr(self.net, "demodulated"):  # WDSSNet takes no brdf
+            wanted.pop("brdf", None)
+        out = dict(self.net(**wanted))
+        out["color"] = out["irradiance"] * batch["brdf"]
+        return out
+
+    # ------------------------------------------------------------------------------------------ steps
+
+    def _loss(self, batch: Mapping[str, Any], out: Mapping[str, Tensor | None]) -> dict[str, Tensor]:
+        return self.criterion(
+            out["color"],
+            batch["target"],
+            coefficients=out["coefficients"],
+            target_irradiance=batch["target"] / batch["brdf"],
+            wavelet=getattr(self.net, "wavelet", None),
+            spatial_mask=batch.get("spatial_mask"),
+        )
+
+    def training_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
+        out = self(batch)
+        terms = self._loss(batch, out)
+        if not torch.isfinite(terms["total"]):
+            raise FloatingPointError(
+                f"non-finite training loss at step {self.global_step} (batch {batch_idx}: sequences "
+                f"{batch.get('sequence')}, frames {batch.get('frame', torch.empty(0)).tolist()}, scale "
+                f"{float(batch['scale'][0]):.3g}): " + ", ".join(f"{k}={float(v):.4g}" for k, v in terms.items())
+            )
+        n = batch["target"].shape[0]
+        self.log("train/loss", terms["total"], prog_bar=True, batch_size=n)
+        for name, value in terms.items():
+            if name != "total":
+                self.log(f"train/{name}", value, batch_size=n)
+        return terms["total"]
+
+    def _evaluate(self, batch: Mapping[str, Any], stage: str, suffix: str) -> dict[str, Tensor]:
+        out = self(batch)
+        values = self.metrics(out["color"].float(), batch["target"].float())
+        n = batch["target"].shape[0]
+        for name, per_image in values.items():
+            finite = per_image[torch.isfinite(per_image)]
+            # Identical images have infinite PSNR: average the finite ones, and say so with a count.
+            if name == "psnr" and finite.numel() < per_image.numel():
+                self.log(
+                    f"{stage}/psnr_infinite{suffix}",
+                    float(per_image.numel() - finite.numel()),
+                    reduce_fx="sum",
+                    batch_size=n,
+                    add_dataloader_idx=False,
+                )
+            value = finite.mean() if finite.numel() else per_image.mean()
+            self.log(f"{stage}/{name}{suffix}", value, batch_size=n, add_dataloader_idx=False, prog_bar=name == "psnr")
+        if stage == "val":
+            self.log("val/loss", self._loss(batch, out)["total"], batch_size=n)
+        return out
+
+    def validation_step(self, batch: Mapping[str, Any], batch_idx: int) -> None:
+        out = self._evaluate(batch, "val", "")
+        if (
+            batch_idx == 0
+            and self.hparams.image_every_n_epochs
+            and (self.current_epoch % self.hparams.image_every_n_epochs == 0)
+        ):
+            self._log_images(batch, out)
+
+    def test_step(self, batch: Mapping[str, Any], batch_idx: int, dataloader_idx: int = 0) -> None:
+        self._evaluate(batch, "test", f"@{float(batch['scale'][0]):g}x")
+
+    # ------------------------------------------------------------------------------------------ images
+
+    def _log_images(self, batch: Mapping[str, Any], out: Mapping[str, Tensor | None]) -> None:
+        experiment = getattr(self.logger, "experiment", None)
+        run_id = getattr(self.logger, "run_id", None)
+        if experiment is None or run_id is None or not hasattr(experiment, "log_image"):
+            return
+        panel = comparison_panel(batch, out, self.hparams.tonemap_name)
+        experiment.log_image(run_id, panel, artifact_file=f"images/val_epoch{self.current_epoch:03d}.png")
+        coefficients = out.get("coefficients")
+        if coefficients is not None:
+            experiment.log_image(
+                run_id,
+                subband_panel(coefficients[0]),
+                artifact_file=f"images/subbands_epoch{self.current_epoch:03d}.png",
+            )
+
+    # ------------------------------------------------------------------------------------------ optimisation
+
+    def configure_optimizers(self) -> Any:
+        if not self.trainable:
+            return None
+        optimizer = instantiate(self.optimizer_config)(self.net.parameters())
+        if not self.scheduler_config:
+            return optimizer
+        scheduler = instantiate(self.scheduler_config)(optimizer)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
+
+
+def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None], tonemap_name: str):
+    """LR (nearest-upsampled) | prediction | target | error x4, tone-mapped, as an (H, 4W, 3) uint8 array."""
+    import numpy as np
+
+    target = tonemap(batch["target"][:1].float(), tonemap_name)
+    pred = tonemap(out["color"][:1].detach().float(), tonemap_name)
+    lr_source = batch.get("lr_color")
+    if lr_source is None and "lr" in batch:
+        lr_brdf = torch.nn.functional.interpolate(batch["brdf"][:1], size=batch["lr"].shape[-2:], mode="nearest")
+        lr_source = batch["lr"][:1] * lr_brdf
+    lr = (
+        torch.zeros_like(target)
+        if lr_source is None
+        else tonemap(
+            torch.nn.functional.interpolate(lr_source[:1].float(), size=target.shape[-2:], mode="nearest"), tonemap_name
+        )
+    )
+    error = ((pred - target).abs() * 4).clamp(0, 1)
+    row = torch.cat([lr, pred, target, error], dim=-1)[0]
+    return (row.permute(1, 2, 0).cpu().numpy() * 255).round().astype(np.uint8)
+
+
+def subband_panel(coefficients: Tensor):
+    """The four subbands of the first image, side by side, each scaled to its own range (uint8)."""
+    import numpy as np
+
+    bands = coefficients.detach().float().view(4, -1, *coefficients.shape[-2:])[:, :3]
+    tiles = []
+    for index, band in enumerate(bands):
+        band = band.mean(0)
+        if index == 0:
+            band = band / band.abs().max().clamp_min(1e-8)
+        else:
+            band = 0.5 + band / (2 * band.abs().max().clamp_min(1e-8))
+        tiles.append(band.clamp(0, 1))
+    image = torch.cat(tiles, dim=-1)
+    return (image.cpu().numpy() * 255).round().astype(np.uint8)

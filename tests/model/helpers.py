@@ -1,0 +1,39 @@
+"""Tiny networks and synthetic batches for model tests."""
+
+from __future__ import annotations
+
+import torch
+
+from wdss.data.sampling import lr_size
+
+TINY = dict(
+    lr_widths=(8, 8, 8, 8),
+    gbuffer_width=8,
+    temporal_widths=(8, 4),
+    fusion_widths=(8,),
+    inr_width=8,
+    mlp_width=8,
+    mlp_depth=1,
+    multi_inr_width=4,
+)
+
+
+def batch(n: int = 2, size: tuple[int, int] = (16, 20), scale: float = 2.0, seed: int = 0) -> dict:
+    g = torch.Generator().manual_seed(seed)
+    h, w = size
+    lh, lw = lr_size(h, w, scale)
+    brdf = 0.2 + 0.8 * torch.rand(n, 3, h, w, generator=g)
+    irradiance = torch.rand(n, 3, h, w, generator=g) * 2
+    return {
+        "lr": torch.nn.functional.interpolate(irradiance, size=(lh, lw), mode="nearest-exact"),
+        "lr_color": torch.nn.functional.interpolate(irradiance * brdf, size=(lh, lw), mode="nearest-exact"),
+        "gbuffer": torch.rand(n, 11, h, w, generator=g),
+        "spatial_mask": (torch.rand(n, 1, h, w, generator=g) > 0.8).float(),
+        "history": irradiance.roll(1, -1),
+        "temporal_mask": torch.rand(n, 5, h, w, generator=g),
+        "brdf": brdf,
+        "target": irradiance * brdf,
+        "scale": torch.full((n,), scale),
+        "sequence": ["synthetic"] * n,
+        "frame": torch.arange(n),
+    }

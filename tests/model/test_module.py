@@ -1,0 +1,193 @@
+"""The LightningModule: losses, a step that learns, overfitting, metrics against scikit-image, checkpoints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+from tests.model.helpers import TINY, batch
+from tests.model.test_network import VARIANTS
+from wdss.model.losses import WDSSLoss, temporal_difference_loss
+from wdss.model.metrics import LPIPS, psnr, ssim
+from wdss.model.module import SuperResolutionModule
+
+WEIGHTS = {"l1": 1.0, "ssim": 0.4, "masked_l1": 0.1, "wavelet": 0.1}
+
+
+def module(transform="swt", basis="haar", head="shared_inr", temporal=True, widths=TINY, **kwargs):
+    net = {
+        "_target_": "wdss.model.network.WDSSNet",
+        "transform": transform,
+        "basis": basis,
+        "head": head,
+        "temporal": temporal,
+        **{k: list(v) if isinstance(v, tuple) else v for k, v in widths.items()},
+    }
+    return SuperResolutionModule(net, loss_weights=kwargs.pop("weights", WEIGHTS), flip=False, **kwargs)
+
+
+@pytest.mark.parametrize("transform,basis,head,temporal", VARIANTS)
+def test_one_step_lowers_the_loss_on_a_fixed_batch(transform, basis, head, temporal):
+    torch.manual_seed(0)
+    model = module(
+        transform, basis, head, temporal, optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": 1e-3}
+    )
+    data = batch(size=(16, 16))
+    optimizer = model.configure_optimizers()
+    losses = []
+    for _ in range(2):
+        terms = model._loss(data, model(data))
+        losses.append(float(terms["total"].detach()))
+        optimizer.zero_grad()
+        terms["total"].backward()
+        optimizer.step()
+    assert losses[1] < losses[0]
+    if transform != "none":
+        assert "wavelet" in model._loss(data, model(data))
+
+
+def test_the_small_preset_overfits_one_patch():
+    """300 Adam steps on one 32x32 patch raise the tone-mapped PSNR by more than 6 dB."""
+    torch.manual_seed(0)
+    small = dict(
+        lr_widths=(16, 24, 24, 32),
+        gbuffer_width=32,
+        temporal_widths=(16, 16, 8),
+        fusion_widths=(32, 24),
+        inr_width=32,
+        mlp_width=32,
+        mlp_depth=2,
+        multi_inr_width=16,
+    )
+    model = module(
+        "swt",
+        "db4",
+        widths=small,
+        weights={"l1": 1.0},
+        optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": 2e-3},
+    )
+    data = batch(n=1, size=(32, 32), seed=3)
+    optimizer = model.configure_optimizers()
+
+    def score() -> float:
+        with torch.no_grad():
+            return float(model.metrics(model(data)["color"], data["target"])["psnr"][0])
+
+    before = score()
+    for _ in range(300):
+        optimizer.zero_grad()
+        model._loss(data, model(data))["total"].backward()
+        optimizer.step()
+    after = score()
+    assert after > before + 6.0, (before, after)
+
+
+def test_metrics_agree_with_scikit_image():
+    g = torch.Generator().manual_seed(0)
+    a = torch.rand(2, 3, 40, 48, generator=g, dtype=torch.float64)
+    b = (a + 0.05 * torch.randn(2, 3, 40, 48, generator=g, dtype=torch.float64)).clamp(0, 1)
+    for i in range(2):
+        x, y = a[i].permute(1, 2, 0).numpy(), b[i].permute(1, 2, 0).numpy()
+        assert float(psnr(b, a)[i]) == pytest.approx(peak_signal_noise_ratio(x, y, data_range=1.0), rel=1e-9)
+        reference = structural_similarity(
+            x, y, data_range=1.0, channel_axis=2, gaussian_weights=True, sigma=1.5, use_sample_covariance=False
+        )
+        assert float(ssim(b, a)[i]) == pytest.approx(reference, abs=2e-3)
+
+
+def test_identical_images_report_infinite_psnr_not_nan():
+    a = torch.rand(1, 3, 16, 16)
+    assert psnr(a, a).item() == float("inf")
+    assert float(ssim(a, a)) == pytest.approx(1.0)
+    assert torch.isfinite(psnr(torch.zeros(1, 3, 8, 8), torch.ones(1, 3, 8, 8))).all()
+
+
+def test_the_temporal_term_does_not_collapse_to_plain_l1():
+    target, previous = torch.rand(1, 3, 8, 8), torch.rand(1, 3, 8, 8)
+    output = target + 0.1
+    # A constant offset on every frame is temporally stable: no temporal penalty, though L1 is 0.1.
+    assert float(temporal_difference_loss(output, previous + 0.1, target, previous)) == pytest.approx(0.0, abs=1e-7)
+    assert float(temporal_difference_loss(output, previous, target, previous)) == pytest.approx(0.1, rel=1e-5)
+
+
+def test_lpips_needs_local_weights():
+    with pytest.raises(ValueError, match="lpips > 0 needs LPIPS backbone weights"):
+        WDSSLoss({"l1": 1.0, "lpips": 0.2})
+    with pytest.raises(FileNotFoundError, match="LPIPS backbone weights not found"):
+        LPIPS("/nonexistent/vgg16.pth", "/nonexistent/lin.pth")
+    with pytest.raises(ValueError, match=r"unknown loss terms \['perceptual'\]"):
+        WDSSLoss({"perceptual": 1.0})
+
+
+def test_lpips_loads_torchvision_and_lpips_weight_layouts(tmp_path):
+    """Structure only (random weights, never for numbers): identical images score 0, different ones > 0."""
+    from wdss.model.metrics import _CHANNELS, _VGG16
+
+    state, index, cin = {}, 0, 3
+    for v in _VGG16:
+        if v == "M":
+            index += 1
+            continue
+        state[f"features.{index}.weight"] = torch.randn(v, cin, 3, 3) * 0.1
+        state[f"features.{index}.bias"] = torch.zeros(v)
+        index, cin = index + 2, v
+    torch.save(state, tmp_path / "vgg16.pth")
+    torch.save(
+        {f"lin{i}.model.1.weight": torch.rand(1, c, 1, 1) for i, c in enumerate(_CHANNELS)}, tmp_path / "lin.pth"
+    )
+    lpips = LPIPS(tmp_path / "vgg16.pth", tmp_path / "lin.pth")
+    a, b = torch.rand(2, 3, 32, 32), torch.rand(2, 3, 32, 32)
+    assert torch.allclose(lpips(a, a), torch.zeros(2)) and (lpips(a, b) > 0).all()
+
+
+def test_a_non_finite_loss_stops_training_naming_the_batch():
+    model = module()
+    data = batch()
+    data["target"][0, 0, 0, 0] = float("nan")
+    with pytest.raises(FloatingPointError, match=r"non-finite training loss at step 0 \(batch 3: sequences"):
+        model.training_step(data, 3)
+
+
+def test_baselines_run_through_the_same_path():
+    data = batch(size=(16, 20), scale=2.0)
+    for mode, demodulated in (("bilinear", False), ("bicubic", False), ("bilinear", True)):
+        model = SuperResolutionModule(
+            {"_target_": "wdss.model.baselines.Upsample", "mode": mode, "demodulated": demodulated}, flip=False
+        )
+        out = model(data)
+        assert out["color"].shape == data["target"].shape and model.configure_optimizers() is None
+    # bilinear-demodulated restores the HR BRDF's detail: better than upsampling colour here.
+    colour = SuperResolutionModule({"_target_": "wdss.model.baselines.Upsample"}, flip=False)
+    demod = SuperResolutionModule({"_target_": "wdss.model.baselines.Upsample", "demodulated": True}, flip=False)
+    err = {name: float((m(data)["color"] - data["target"]).abs().mean()) for name, m in (("c", colour), ("d", demod))}
+    assert err["d"] < err["c"]
+
+
+def test_checkpoint_round_trip_rebuilds_the_model(tmp_path):
+    import lightning as L
+    from torch.utils.data import DataLoader
+
+    torch.manual_seed(0)
+    model = module("dwt", "db4", "fusion_ll")
+    data = batch(n=2, size=(16, 16))
+    loader = DataLoader([data], batch_size=None)
+    trainer = L.Trainer(
+        max_steps=2,
+        logger=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        default_root_dir=tmp_path,
+        enable_checkpointing=False,
+    )
+    trainer.fit(model, loader)
+    path = tmp_path / "model.ckpt"
+    trainer.save_checkpoint(path)
+    loaded = SuperResolutionModule.load_from_checkpoint(path, weights_only=True)
+    assert loaded.net.transform == "dwt" and loaded.net.head == "fusion_ll"
+    model.eval()
+    loaded.eval()
+    with torch.no_grad():
+        torch.testing.assert_close(loaded(data)["color"], model(data)["color"])
+    assert np.isclose(loaded.hparams.loss_weights["ssim"], 0.4)

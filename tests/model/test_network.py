@@ -1,0 +1,73 @@
+"""The network: shapes for every variant, arbitrary scales, configuration errors, block folding."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+import torch
+
+from tests.model.helpers import TINY, batch
+from wdss.model.blocks import RIRBlock
+from wdss.model.network import WDSSNet
+
+VARIANTS = [
+    (t, b, h, temporal)
+    for t, b, h, temporal in itertools.product(
+        ("none", "dwt", "swt"), ("haar", "db4", "sym4"), ("shared_inr", "multi_inr", "fusion_ll"), (True, False)
+    )
+    if not (t == "none" and (h != "shared_inr" or b != "haar"))
+]
+
+
+def run(net: WDSSNet, data: dict) -> dict:
+    return net(**{k: data[k] for k in (*net.inputs, "scale")})
+
+
+@pytest.mark.parametrize("transform,basis,head,temporal", VARIANTS)
+def test_forward_shapes_of_every_variant(transform, basis, head, temporal):
+    net = WDSSNet(transform, basis, head, temporal, **TINY)
+    data = batch(size=(16, 20))
+    out = run(net, data)
+    assert out["irradiance"].shape == (2, 3, 16, 20) and (out["irradiance"] >= 0).all()
+    expected = {"none": None, "dwt": (2, 12, 8, 10), "swt": (2, 12, 16, 20)}[transform]
+    assert (out["coefficients"] is None) if expected is None else out["coefficients"].shape == expected
+    assert ("history" in net.inputs) == temporal
+
+
+@pytest.mark.parametrize("scale", [1.0, 1.01, 2.37, 3.0, 4.0, 8.0])
+@pytest.mark.parametrize("transform", ["dwt", "swt"])
+def test_any_scale_and_frames_not_divisible_by_it(transform, scale):
+    net = WDSSNet(transform, "db4", **TINY)
+    data = batch(size=(27, 35), scale=scale)
+    out = run(net, data)
+    assert out["irradiance"].shape == (2, 3, 27, 35) and torch.isfinite(out["irradiance"]).all()
+
+
+def test_heads_that_need_subbands_refuse_transform_none():
+    with pytest.raises(ValueError, match="head=fusion_ll needs wavelet subbands, but transform=none"):
+        WDSSNet("none", "haar", "fusion_ll")
+    with pytest.raises(ValueError, match="model.head must be one of"):
+        WDSSNet("swt", "haar", "two_inr")
+
+
+def test_a_temporal_network_asks_for_history():
+    net = WDSSNet("swt", "haar", temporal=True, **TINY)
+    data = batch()
+    with pytest.raises(ValueError, match="needs history and temporal_mask"):
+        net(data["lr"], data["gbuffer"], data["spatial_mask"], data["scale"])
+
+
+def test_paper_widths_give_the_papers_parameter_count():
+    counts = {t: sum(p.numel() for p in WDSSNet(t, "db4").parameters()) for t in ("none", "dwt", "swt")}
+    assert all(0.5e6 < c < 0.62e6 for c in counts.values()), counts
+
+
+def test_rir_blocks_fold_into_one_convolution_exactly():
+    block = RIRBlock(6).double()
+    x = torch.randn(2, 6, 9, 7, dtype=torch.float64)
+    before = block(x)
+    block.reparameterize()
+    torch.testing.assert_close(block(x), before)
+    net = WDSSNet("swt", "haar", gbuffer_block="rir", **TINY)
+    assert any(isinstance(m, RIRBlock) for m in net.modules())
