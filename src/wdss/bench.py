@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m wdss.bench wavelets|data``.
+"""Benchmarks: ``python -m wdss.bench wavelets|data|model``.
 
 Every benchmark reports medians of repeated runs and ratios measured in the same process, never absolute
 targets: timing on shared machines is noisy, so comparisons are only made within one run.
@@ -120,6 +120,46 @@ def bench_data(size: tuple[int, int], frames: int, repeats: int, scale: float) -
     return table
 
 
+# --------------------------------------------------------------------------------------------------------
+# model
+# --------------------------------------------------------------------------------------------------------
+
+
+def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, widths: str = "paper") -> Table:
+    """Whole-forward time and FLOPs of every transform x basis x head, with ratios to ``none`` (one run)."""
+    from wdss.model.network import HEADS, WDSSNet
+    from wdss.model.profile import dummy_inputs, flops, forward_ms
+
+    height, width = size
+    kwargs = {} if widths == "paper" else SMALL_WIDTHS
+    variants = [("none", "-", "shared_inr")] + [(t, b, h) for t in ("dwt", "swt") for b in BASES for h in HEADS]
+    table = Table(
+        title=f"inference at {width}x{height} output, {scale}x, {widths} widths, {device}, median of {repeats}"
+    )
+    for column in ("transform", "basis", "head", "params", "GFLOPs", "synthesis", "ms", "time / none", "FLOPs / none"):
+        table.add_column(column, justify="left" if column in ("transform", "basis", "head") else "right")
+    reference: tuple[float, float] | None = None
+    for transform, basis, head in variants:
+        net = WDSSNet(transform, basis if basis != "-" else "haar", head, **kwargs).to(device).eval()
+        inputs = dummy_inputs(net, height, width, scale, device)
+        total, top = flops(net, inputs)
+        ms = forward_ms(net, inputs, repeats=repeats)
+        if reference is None:
+            reference = (ms, total)
+        params = sum(p.numel() for p in net.parameters())
+        table.add_row(
+            transform, basis, head, f"{params / 1e6:.3f} M", f"{total / 1e9:.1f}", f"{top.get('wavelet', 0) / total:.2%}",
+            f"{ms:.0f}", f"{ms / reference[0]:.3f}", f"{total / reference[1]:.3f}",
+        )  # fmt: skip
+    return table
+
+
+SMALL_WIDTHS = dict(
+    lr_widths=(16, 24, 24, 32), gbuffer_width=32, temporal_widths=(16, 16, 8), fusion_widths=(32, 24),
+    inr_width=32, mlp_width=32, mlp_depth=2, multi_inr_width=16,
+)  # fmt: skip
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m wdss.bench", description=__doc__)
     sub = parser.add_subparsers(dest="what", required=True)
@@ -133,6 +173,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     data.add_argument("--frames", type=int, default=8)
     data.add_argument("--repeats", type=int, default=3)
     data.add_argument("--scale", type=float, default=2.0)
+    model = sub.add_parser("model", help="inference ms and FLOPs of every transform x basis x head")
+    model.add_argument("--size", type=int, nargs=2, default=(540, 960), metavar=("H", "W"))
+    model.add_argument("--scale", type=float, default=2.0)
+    model.add_argument("--repeats", type=int, default=3)
+    model.add_argument("--widths", choices=("paper", "small"), default="paper")
+    model.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     args = parser.parse_args(argv)
 
     console = Console()
@@ -140,6 +186,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         console.print(bench_wavelets(args.shape, args.repeats, args.device, args.bases))
     elif args.what == "data":
         console.print(bench_data(tuple(args.size), args.frames, args.repeats, args.scale))
+    elif args.what == "model":
+        console.print(bench_model(tuple(args.size), args.scale, args.repeats, args.device, args.widths))
 
 
 if __name__ == "__main__":

@@ -255,10 +255,10 @@ class WDSSNet(nn.Module):
             coefficients = None
         elif self.transform == "dwt":
             coefficients = self.exit(merged)
-            image = self.wavelet.synthesis(coefficients)
+            image = self.wavelet(coefficients)  # forward() is the synthesis; a submodule for FLOP counts
         else:
             coefficients = self.exit(F.pixel_shuffle(merged, 2))
-            image = self.wavelet.synthesis(coefficients)
+            image = self.wavelet(coefficients)  # forward() is the synthesis; a submodule for FLOP counts
         image = image[..., :height, :width]
         if coefficients is not None and self.transform == "swt":
             coefficients = coefficients[..., :height, :width]

@@ -1,0 +1,62 @@
+"""Inference cost of a network: whole-forward median milliseconds and FLOPs (``torch.utils.flop_counter``).
+
+The authors timed modules with CUDA events in FP16; wdss times the whole forward (synchronised before and
+after on a GPU) and counts FLOPs, which do not depend on the machine.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import torch
+from torch import nn
+from torch.utils.flop_counter import FlopCounterMode
+
+from wdss.data.sampling import lr_size
+
+__all__ = ["dummy_inputs", "flops", "forward_ms"]
+
+
+def dummy_inputs(net: nn.Module, height: int, width: int, scale: float, device: str = "cpu") -> dict:
+    """Random inputs of the right shapes for ``net.inputs`` at an ``height x width`` output and ``scale``."""
+    h, w = lr_size(height, width, scale)
+    shapes = {
+        "lr": (3, h, w), "lr_color": (3, h, w), "gbuffer": (11, height, width), "spatial_mask": (1, height, width),
+        "history": (3, height, width), "temporal_mask": (5, height, width), "brdf": (3, height, width),
+    }  # fmt: skip
+    inputs = {k: torch.rand(1, *shapes[k], device=device) for k in net.inputs}
+    if "scale" in net.forward.__code__.co_varnames:
+        inputs["scale"] = torch.full((1,), float(scale), device=device)
+    if "brdf" in net.forward.__code__.co_varnames:
+        inputs["brdf"] = torch.rand(1, *shapes["brdf"], device=device)
+    return inputs
+
+
+def flops(net: nn.Module, inputs: dict) -> tuple[int, dict[str, int]]:
+    """Total FLOPs of one forward and the FLOPs per top-level submodule."""
+    counter = FlopCounterMode(display=False)
+    with torch.no_grad(), counter:
+        net(**inputs)
+    per_module = counter.get_flop_counts()
+    top = {}
+    for name, counts in per_module.items():
+        parts = name.split(".")
+        if len(parts) == 2:  # "<Net>.<child>"
+            top[parts[1]] = sum(counts.values())
+    return counter.get_total_flops(), top
+
+
+def forward_ms(net: nn.Module, inputs: dict, repeats: int = 5, warmup: int = 2) -> float:
+    """Median wall-clock milliseconds of one forward (synchronised on CUDA)."""
+    sync = torch.cuda.synchronize if next(iter(inputs.values())).is_cuda else (lambda: None)
+    times = []
+    with torch.inference_mode():
+        for i in range(warmup + repeats):
+            sync()
+            start = time.perf_counter()
+            net(**inputs)
+            sync()
+            if i >= warmup:
+                times.append((time.perf_counter() - start) * 1e3)
+    return statistics.median(times)
