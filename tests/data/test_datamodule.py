@@ -246,3 +246,25 @@ def test_the_default_data_config_instantiates():
     dm = instantiate(cfg.data)
     assert isinstance(dm, SceneDataModule) and dm.inputs == ("lr", "target") and dm.scale == (2.0, 4.0)
     assert dm.prepare.func is render_preset and dm.prepare.keywords == {"name": "mini"}
+
+
+def test_sequences_share_one_patch_and_scale_across_steps(root):
+    keys = ["lr", "motion", "temporal_mask", "target", "brdf"]
+    dm = SceneDataModule(
+        root, {"train": ["seq_a"], "val": ["seq_a"]}, keys, scale=[2, 4], patch_size=12, batch_size=1, sequence_length=3
+    )
+    dm.setup("fit")
+    assert [frame for _, frame in dm.datasets["train"].items] == [4]  # frames 2-4, and 1 as history
+    assert [frame for _, frame in dm.datasets["val"].items] == [2, 3, 4]  # evaluation stays frame by frame
+    torch.manual_seed(0)
+    batch = next(iter(dm.train_dataloader()))
+    steps = batch["steps"]
+    assert [int(s["frame"][0]) for s in steps] == [2, 3, 4]
+    assert len({float(s["scale"][0]) for s in steps}) == 1
+    # The same window in consecutive frames: the content moved by the motion vectors (1, -1) in between.
+    from wdss.data import warp_backward
+
+    for previous, current in zip(steps, steps[1:], strict=False):
+        warped = warp_backward(previous["target"], current["motion"])
+        inside = warped.abs().sum(1) > 1e-3
+        torch.testing.assert_close(warped[:, :, inside[0]], current["target"][:, :, inside[0]], rtol=1e-5, atol=1e-5)

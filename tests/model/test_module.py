@@ -16,7 +16,7 @@ from wdss.model.module import SuperResolutionModule
 WEIGHTS = {"l1": 1.0, "ssim": 0.4, "masked_l1": 0.1, "wavelet": 0.1}
 
 
-def module(transform="swt", basis="haar", head="shared_inr", temporal=True, widths=TINY, **kwargs):
+def module(transform="swt", basis="haar", head="shared_inr", temporal=True, widths=TINY, temporal_mode=None, **kwargs):
     net = {
         "_target_": "wdss.model.network.WDSSNet",
         "transform": transform,
@@ -25,7 +25,10 @@ def module(transform="swt", basis="haar", head="shared_inr", temporal=True, widt
         "temporal": temporal,
         **{k: list(v) if isinstance(v, tuple) else v for k, v in widths.items()},
     }
-    return SuperResolutionModule(net, loss_weights=kwargs.pop("weights", WEIGHTS), flip=False, **kwargs)
+    kwargs.pop("flip", None)
+    mode = temporal_mode or ("gt_history" if temporal else "none")
+    weights = kwargs.pop("weights", WEIGHTS)
+    return SuperResolutionModule(net, loss_weights=weights, flip=False, temporal=mode, **kwargs)
 
 
 @pytest.mark.parametrize("transform,basis,head,temporal", VARIANTS)
@@ -191,3 +194,48 @@ def test_checkpoint_round_trip_rebuilds_the_model(tmp_path):
     with torch.no_grad():
         torch.testing.assert_close(loaded(data)["color"], model(data)["color"])
     assert np.isclose(loaded.hparams.loss_weights["ssim"], 0.4)
+
+
+def test_recurrent_training_feeds_back_its_own_warped_output():
+    torch.manual_seed(0)
+    model = module("swt", "haar", temporal=True, weights={"l1": 1.0, "temporal": 0.3}, temporal_mode="recurrent")
+    assert "motion" in model.inputs and "history" not in model.inputs
+    steps = []
+    for t in range(3):
+        step = batch(size=(16, 16), seed=t)
+        step["motion"] = torch.zeros(2, 2, 16, 16)
+        steps.append(step)
+    seen = []
+    forward = model.net.forward
+
+    def spy(**kwargs):
+        seen.append(kwargs["history"].clone())
+        return forward(**kwargs)
+
+    model.net.forward = spy
+    loss = model.training_step({"steps": steps}, 0)
+    assert torch.isfinite(loss) and loss.requires_grad
+    assert seen[0].abs().sum() == 0 and seen[1].abs().sum() > 0  # step 2 sees step 1's output (zero motion)
+    loss.backward()
+    assert model.net.temporal_branch.layers[0].feature.weight.grad.abs().sum() > 0
+
+
+def test_recurrent_evaluation_carries_state_only_between_consecutive_frames():
+    model = module("dwt", "haar", temporal=True, temporal_mode="recurrent", flip=None)
+    seen = []
+    forward = model.net.forward
+    model.net.forward = lambda **kw: (seen.append(float(kw["history"].abs().sum())), forward(**kw))[1]
+    for sequence, frame in (("a", 1), ("a", 2), ("a", 4), ("b", 5)):
+        data = batch(n=1, size=(16, 16))
+        data["motion"] = torch.zeros(1, 2, 16, 16)
+        data["sequence"], data["frame"] = [sequence], torch.tensor([frame])
+        with torch.no_grad():
+            model._evaluate(data, "val", "")
+    assert seen[0] == 0 and seen[1] > 0 and seen[2] == 0 and seen[3] == 0
+
+
+def test_temporal_settings_must_agree():
+    with pytest.raises(ValueError, match="only temporal=recurrent produces"):
+        module(weights={"l1": 1.0, "temporal": 0.3})
+    with pytest.raises(ValueError, match="model.temporal=none but the network has temporal branch"):
+        module(temporal=True, temporal_mode="none")

@@ -20,6 +20,10 @@ key                shape                        meaning
 ``scale``          (N,)                         the nominal scale s of the batch (h = round(H / s))
 ``sequence``       list[str], ``frame`` (N,)    where each sample comes from
 =================  ===========================  ================================================================
+
+With ``sequence_length = T > 1`` a training batch is ``{"steps": [batch_1, ..., batch_T]}``: T consecutive
+frames, the same patch and mirroring in each, one scale; validation and test batches stay single frames, in
+order.
 """
 
 from __future__ import annotations
@@ -83,6 +87,7 @@ class SceneDataModule(L.LightningDataModule):
         preprocessing: Preprocessing | Mapping[str, Any] | None = None,
         flips: bool = False,
         first_frame: str = "skip",
+        sequence_length: int = 1,
         seed: int = 0,
         prepare: Callable[[Path], None] | None = None,
     ) -> None:
@@ -110,6 +115,7 @@ class SceneDataModule(L.LightningDataModule):
             self.prep = Preprocessing(**dict(preprocessing or {}))
         self.flips = flips
         self.first_frame = first_frame
+        self.sequence_length = sequence_length
         self.seed = seed
         self.prepare = prepare
         self.datasets: dict[str, Any] = {}
@@ -139,6 +145,7 @@ class SceneDataModule(L.LightningDataModule):
             flips=self.flips and split == "train",
             first_frame=self.first_frame,
             frame_ranges=ranges,
+            sequence_length=self.sequence_length if split == "train" else 1,
         )
 
     def setup(self, stage: str | None = None) -> None:
@@ -150,6 +157,7 @@ class SceneDataModule(L.LightningDataModule):
             self.datasets["test"] = [self._dataset("test", s, None) for s in self.test_scales]
 
     def _loader(self, dataset: FrameDataset, batch_size: int, *, train: bool) -> DataLoader:
+        # Evaluation keeps frames in order, so a recurrent model can feed back its previous output.
         generator = torch.Generator().manual_seed(self.seed) if train else None
         return DataLoader(
             dataset,

@@ -128,6 +128,8 @@ class FrameDataset(Dataset):
     ``patch``: high-resolution patch size for training, ``None`` for full frames.
     ``first_frame``: ``"skip"`` leaves out frames without a previous frame when history is needed;
     ``"zeros"`` keeps them with zero history.
+    ``sequence_length``: ``T > 1`` makes each sample ``T`` consecutive frames ending at the item's frame,
+    cropped and mirrored alike (``{"steps": [...]}``), for recurrent training.
     """
 
     def __init__(
@@ -141,9 +143,12 @@ class FrameDataset(Dataset):
         flips: bool = False,
         first_frame: str = "skip",
         frame_ranges: dict[str, tuple[int, int]] | None = None,
+        sequence_length: int = 1,
     ) -> None:
         if first_frame not in ("skip", "zeros"):
             raise ValueError(f"first_frame must be 'skip' or 'zeros', got {first_frame!r}")
+        if sequence_length < 1:
+            raise ValueError(f"sequence_length must be >= 1, got {sequence_length}")
         self.sequences = list(sequences)
         self.keys = tuple(keys)
         self.prep = preprocessing or Preprocessing()
@@ -151,6 +156,7 @@ class FrameDataset(Dataset):
         self.patch = patch
         self.flips = flips
         self.first_frame = first_frame
+        self.sequence_length = sequence_length
         self.need = requirements(self.keys, self.prep)
         history = bool(self.need["prev"])
         self.items: list[tuple[int, int]] = []
@@ -161,12 +167,18 @@ class FrameDataset(Dataset):
                 frames = [f for f in frames if start <= f < stop]
             available = set(seq.frames)
             for frame in frames:
-                if history and first_frame == "skip" and frame - 1 not in available:
+                first = frame - sequence_length + 1
+                if any(f not in available for f in range(first, frame + 1)):
+                    continue
+                if history and first_frame == "skip" and first - 1 not in available:
                     continue
                 self.items.append((index, frame))
         if not self.items:
             names = ", ".join(s.name for s in self.sequences)
-            raise SceneError(f"no usable frames in sequences [{names}] (history needs two consecutive frames)")
+            raise SceneError(
+                f"no usable frames in sequences [{names}] (history needs two consecutive frames, a sequence "
+                f"length of {sequence_length} needs {sequence_length})"
+            )
 
     def __len__(self) -> int:
         return len(self.items)
@@ -183,20 +195,18 @@ class FrameDataset(Dataset):
     def _read(self, seq: Sequence, frame: int, height: int, buffers: set[str]) -> dict[str, Tensor]:
         return _clean(seq.read(frame, height, sorted(buffers), sanitize=self.prep.sanitize), self.prep)
 
-    def __getitem__(self, index: int) -> dict:
-        seq_index, frame = self.items[index]
-        seq = self.sequences[seq_index]
-        lr_height = self.native_lr(seq)
+    def _frame(self, seq: Sequence, frame: int, lr_height: int | None) -> dict:
+        """The uncropped buffers of one frame in each role."""
         hr_need = set(self.need["hr"]) | (set() if lr_height else self.need["lr"])
         hr = self._read(seq, frame, seq.hr, hr_need) if hr_need else {}
         lr = self._read(seq, frame, lr_height, self.need["lr"]) if lr_height else {}
         if lr and hr:
             hr_shape, lr_shape = next(iter(hr.values())).shape[-2:], next(iter(lr.values())).shape[-2:]
-            if tuple(lr_shape) != lr_size(*hr_shape, float(self.scale)):
+            expected = lr_size(*hr_shape, float(self.scale))
+            if tuple(lr_shape) != expected:
                 raise SceneError(
                     f"sequence {seq.name!r}, frame {frame}: the {lr_height}P frame is {lr_shape[1]}x{lr_shape[0]}, "
-                    f"but {hr_shape[1]}x{hr_shape[0]} at scale {self.scale} needs "
-                    f"{lr_size(*hr_shape, float(self.scale))[1]}x{lr_size(*hr_shape, float(self.scale))[0]}"
+                    f"but {hr_shape[1]}x{hr_shape[0]} at scale {self.scale} needs {expected[1]}x{expected[0]}"
                 )
         prev: dict[str, Tensor] = {}
         has_history = frame - 1 in set(seq.frames)
@@ -206,20 +216,30 @@ class FrameDataset(Dataset):
             else:  # first frame, kept with zero history
                 shape = next(iter(hr.values())).shape[-2:]
                 prev = {b: torch.zeros(BUFFERS[b], *shape) for b in self.need["prev"]}
-        hr, prev, lr = self._crop(hr, prev, lr, lr_height and seq.hr / lr_height)
-        if self.flips:
-            horizontal, vertical = bool(torch.rand(()) < 0.5), bool(torch.rand(()) < 0.5)
-            camera = seq.camera(frame)
-            hr = flip(hr, horizontal=horizontal, vertical=vertical, camera=camera)
-            lr = flip(lr, horizontal=horizontal, vertical=vertical, camera=camera)
-            prev_camera = seq.camera(frame - 1) if has_history else camera
-            prev = flip(prev, horizontal=horizontal, vertical=vertical, camera=prev_camera)
-        return {"hr": hr, "prev": prev, "lr": lr, "sequence": seq.name, "frame": frame}
+        return {"hr": hr, "prev": prev, "lr": lr, "sequence": seq.name, "frame": frame, "has_history": has_history}
 
-    def _crop(self, hr: dict, prev: dict, lr: dict, native_scale: float | None) -> tuple[dict, dict, dict]:
+    def __getitem__(self, index: int) -> dict:
+        seq_index, frame = self.items[index]
+        seq = self.sequences[seq_index]
+        lr_height = self.native_lr(seq)
+        steps = [self._frame(seq, f, lr_height) for f in range(frame - self.sequence_length + 1, frame + 1)]
+        window = self._window(steps[0], lr_height and seq.hr / lr_height)
+        flips = (bool(torch.rand(()) < 0.5), bool(torch.rand(()) < 0.5)) if self.flips else (False, False)
+        for step in steps:
+            self._crop(step, window)
+            if any(flips):
+                camera = seq.camera(step["frame"])
+                prev_camera = seq.camera(step["frame"] - 1) if step["has_history"] else camera
+                for role, cam in (("hr", camera), ("lr", camera), ("prev", prev_camera)):
+                    step[role] = flip(step[role], horizontal=flips[0], vertical=flips[1], camera=cam)
+            del step["has_history"]
+        return steps[0] if self.sequence_length == 1 else {"steps": steps}
+
+    def _window(self, sample: dict, native_scale: float | None) -> tuple | None:
+        """A random patch position shared by every step of a sample: HR ``(y, x, size)`` and LR likewise."""
         if self.patch is None:
-            return hr, prev, lr
-        full = next(iter(hr.values())) if hr else None
+            return None
+        full = next(iter(sample["hr"].values()), None)
         height, width = full.shape[-2:] if full is not None else (0, 0)
         size = self.patch
         if height < size or width < size:
@@ -230,16 +250,19 @@ class FrameDataset(Dataset):
                 raise SceneError(f"patch size {size} is not a multiple of the native scale {step}")
             y = int(torch.randint(0, (height - size) // step + 1, ())) * step
             x = int(torch.randint(0, (width - size) // step + 1, ())) * step
-            ly, lx, lsize = y // step, x // step, size // step
-            lr = {k: v[..., ly : ly + lsize, lx : lx + lsize] for k, v in lr.items()}
-        else:
-            y = int(torch.randint(0, height - size + 1, ()))
-            x = int(torch.randint(0, width - size + 1, ()))
+            return (y, x, size), (y // step, x // step, size // step)
+        y = int(torch.randint(0, height - size + 1, ()))
+        x = int(torch.randint(0, width - size + 1, ()))
+        return (y, x, size), None
 
-        def crop(d: dict) -> dict:
-            return {k: v[..., y : y + size, x : x + size] for k, v in d.items()}
-
-        return crop(hr), crop(prev), lr
+    @staticmethod
+    def _crop(sample: dict, window: tuple | None) -> None:
+        if window is None:
+            return
+        for role, box in (("hr", window[0]), ("prev", window[0]), ("lr", window[1])):
+            if box is not None:
+                y, x, size = box
+                sample[role] = {k: v[..., y : y + size, x : x + size] for k, v in sample[role].items()}
 
 
 class Collate:
@@ -257,12 +280,18 @@ class Collate:
         return float(self.scale)
 
     def __call__(self, samples: list[dict]) -> dict:
+        scale = self.pick_scale()
+        if "steps" in samples[0]:  # sequences: one batch per time step, all at the batch's scale
+            length = len(samples[0]["steps"])
+            return {"steps": [self.batch([s["steps"][t] for s in samples], scale) for t in range(length)]}
+        return self.batch(samples, scale)
+
+    def batch(self, samples: list[dict], scale: float) -> dict:
         def stack(role: str) -> dict[str, Tensor]:
             names = samples[0][role].keys()
             return {name: torch.stack([s[role][name] for s in samples]) for name in names}
 
         hr, prev, lr = stack("hr"), stack("prev"), stack("lr")
-        scale = self.pick_scale()
         need_lr = requirements(self.keys - {"scale"}, self.prep)["lr"]
         if need_lr and not lr:
             height, width = next(iter(hr.values())).shape[-2:]

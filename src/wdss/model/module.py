@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 from torch import Tensor, nn
 
 from wdss.data.tonemap import tonemap
+from wdss.data.warp import warp_backward
 from wdss.model.losses import WDSSLoss
 from wdss.model.metrics import LPIPS, ImageMetrics
 
@@ -47,6 +48,8 @@ class SuperResolutionModule(L.LightningModule):
         lpips: Mapping[str, str] | None = None,
         image_every_n_epochs: int = 1,
         trainable: bool = True,
+        temporal: str = "gt_history",
+        detach_history: bool = False,
     ) -> None:
         super().__init__()
         # Plain containers only: checkpoints then load with weights_only=True and rebuild the network.
@@ -59,6 +62,8 @@ class SuperResolutionModule(L.LightningModule):
             "lpips": _plain(lpips),
             "image_every_n_epochs": image_every_n_epochs,
             "trainable": trainable,
+            "temporal": temporal,
+            "detach_history": detach_history,
         }
         if isinstance(net, nn.Module):
             self.net = net
@@ -72,6 +77,23 @@ class SuperResolutionModule(L.LightningModule):
         self.optimizer_config = hparams["optimizer"]
         self.scheduler_config = hparams["scheduler"]
         self.trainable = trainable and any(p.requires_grad for p in self.net.parameters())
+        self.temporal = temporal
+        self._check_temporal()
+        self._state: tuple[str, int, Tensor] | None = None  # recurrent evaluation: the last output, by frame
+
+    def _check_temporal(self) -> None:
+        if self.temporal not in ("gt_history", "recurrent", "none"):
+            raise ValueError(f"model.temporal must be gt_history, recurrent or none, got {self.temporal!r}")
+        has_branch = "history" in getattr(self.net, "inputs", ())
+        if has_branch != (self.temporal != "none"):
+            raise ValueError(
+                f"model.temporal={self.temporal} but the network {'has' if has_branch else 'has no'} temporal branch"
+            )
+        if self.criterion.weights.get("temporal") and self.temporal != "recurrent":
+            raise ValueError(
+                "loss.weights.temporal > 0 compares consecutive outputs, which only temporal=recurrent produces "
+                "(with gt_history the model never sees its previous output); set it to 0 or use recurrent"
+            )
 
     # ------------------------------------------------------------------------------------------ model
 
@@ -81,6 +103,8 @@ class SuperResolutionModule(L.LightningModule):
         keys = set(self.net.inputs) | {"brdf", "target"}
         if self.criterion.weights.get("masked_l1"):
             keys.add("spatial_mask")
+        if self.temporal == "recurrent":  # the history is the model's own previous output, warped
+            keys = (keys - {"history"}) | {"motion"}
         return tuple(sorted(keys))
 
     def forward(self, batch: Mapping[str, Any]) -> dict[str, Tensor | None]:
@@ -93,7 +117,9 @@ class SuperResolutionModule(L.LightningModule):
 
     # ------------------------------------------------------------------------------------------ steps
 
-    def _loss(self, batch: Mapping[str, Any], out: Mapping[str, Tensor | None]) -> dict[str, Tensor]:
+    def _loss(
+        self, batch: Mapping[str, Any], out: Mapping[str, Tensor | None], temporal: tuple[Tensor, Tensor] | None = None
+    ) -> dict[str, Tensor]:
         return self.criterion(
             out["color"],
             batch["target"],
@@ -101,11 +127,48 @@ class SuperResolutionModule(L.LightningModule):
             target_irradiance=batch["target"] / batch["brdf"],
             wavelet=getattr(self.net, "wavelet", None),
             spatial_mask=batch.get("spatial_mask"),
+            temporal=temporal,
         )
 
+    def _with_history(self, batch: Mapping[str, Any], previous: Tensor | None) -> dict[str, Any]:
+        """The batch with ``history`` = the previous output warped by the motion vectors (zeros at the start)."""
+        step = dict(batch)
+        if previous is None:
+            step["history"] = torch.zeros_like(batch["target"])
+        else:
+            step["history"] = warp_backward(
+                previous.detach() if self.hparams.detach_history else previous, batch["motion"]
+            )
+        return step
+
+    def _sequence_loss(self, steps: list[Mapping[str, Any]]) -> dict[str, Tensor]:
+        """Recurrent training over T frames: mean of per-step losses, the temporal term from step 2 on."""
+        totals: dict[str, Tensor] = {}
+        previous: dict[str, Tensor | None] | None = None
+        for index, step in enumerate(steps):
+            step = self._with_history(step, previous["irradiance"] if previous else None)
+            out = self(step)
+            temporal = None
+            if previous is not None:
+                temporal = (
+                    warp_backward(previous["color"], step["motion"]),
+                    warp_backward(steps[index - 1]["target"], step["motion"]),
+                )
+            for name, value in self._loss(step, out, temporal).items():
+                totals[name] = totals.get(name, 0.0) + value / len(steps)
+            previous = out
+        return totals
+
     def training_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
-        out = self(batch)
-        terms = self._loss(batch, out)
+        if "steps" in batch:
+            if self.temporal != "recurrent":
+                raise ValueError("sequence batches (data.sequence_length > 1) are for temporal=recurrent")
+            terms = self._sequence_loss(batch["steps"])
+            batch = batch["steps"][-1]
+        else:
+            if self.temporal == "recurrent":
+                batch = self._with_history(batch, None)
+            terms = self._loss(batch, self(batch))
         if not torch.isfinite(terms["total"]):
             raise FloatingPointError(
                 f"non-finite training loss at step {self.global_step} (batch {batch_idx}: sequences "
@@ -120,7 +183,13 @@ class SuperResolutionModule(L.LightningModule):
         return terms["total"]
 
     def _evaluate(self, batch: Mapping[str, Any], stage: str, suffix: str) -> dict[str, Tensor]:
+        if self.temporal == "recurrent":  # frames arrive in order: feed back the previous output of the sequence
+            state, key = self._state, (batch["sequence"][0], int(batch["frame"][0]))
+            follows = state is not None and state[0] == key[0] and state[1] == key[1] - 1 and len(batch["frame"]) == 1
+            batch = self._with_history(batch, state[2] if follows else None)
         out = self(batch)
+        if self.temporal == "recurrent":
+            self._state = (batch["sequence"][0], int(batch["frame"][0]), out["irradiance"].detach())
         values = self.metrics(out["color"].float(), batch["target"].float())
         n = batch["target"].shape[0]
         for name, per_image in values.items():
