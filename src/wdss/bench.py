@@ -147,8 +147,9 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
         if reference is None:
             reference = (ms, total)
         params = sum(p.numel() for p in net.parameters())
+        synthesis = top.get("wavelet", 0) / total
         table.add_row(
-            transform, basis, head, f"{params / 1e6:.3f} M", f"{total / 1e9:.1f}", f"{top.get('wavelet', 0) / total:.2%}",
+            transform, basis, head, f"{params / 1e6:.3f} M", f"{total / 1e9:.1f}", f"{synthesis:.2%}",
             f"{ms:.0f}", f"{ms / reference[0]:.3f}", f"{total / reference[1]:.3f}",
         )  # fmt: skip
     return table
