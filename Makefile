@@ -9,7 +9,7 @@ PY := $(VENV)/bin/python
 PIP_INSTALL := $(PY) -m pip install --disable-pip-version-check -q -c constraints.txt
 export MLFLOW_DISABLE_TELEMETRY ?= true
 
-.PHONY: help setup setup-render test test-fast lint format train bench data clean
+.PHONY: help setup setup-render test test-fast lint format train ui bench data clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | sort | \
@@ -45,12 +45,16 @@ format: setup ## ruff: fix what can be fixed and format
 	$(PY) -m ruff check --fix src tests
 	$(PY) -m ruff format src tests
 
-train: setup ## a short default training run, tracked in MLflow
-	$(PY) -m wdss.train
+train: setup-render ## a short default training (renders data/mini on first use), tracked in MLflow
+	$(PY) -m wdss.train experiment=cpu
 
-bench: setup ## benchmarks: wavelet transforms against ptwt, data loading
+ui: setup ## the MLflow UI on http://127.0.0.1:5000 (runs of mlflow.db)
+	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///mlflow.db --host 127.0.0.1 --port 5000
+
+bench: setup ## benchmarks: wavelet transforms against ptwt, data loading, model inference
 	$(PY) -m wdss.bench wavelets
 	$(PY) -m wdss.bench data
+	$(PY) -m wdss.bench model
 
 clean: ## remove caches (keeps .venv, data and mlflow.db)
 	rm -rf .pytest_cache .ruff_cache src/*.egg-info

@@ -1,22 +1,181 @@
-"""Training entry point: ``python -m wdss.train``.
+"""Training entry point: ``python -m wdss.train [group=option ...]`` (config: ``conf/train.yaml``).
 
-The network and its LightningModule (issue 5) and the Hydra configuration (issue 6) are not built yet;
-until they are, this entry point says so instead of pretending to train.
+``train(cfg)`` is a plain function that the entry point and the tests both call: it validates the
+configuration, seeds everything, builds the LightningModule, the DataModule (asking it for exactly the
+batch keys the model consumes), the MLflow logger and the Trainer, fits (unless the model is a baseline),
+tests on every test scale, and logs the inference cost. ``ckpt_path=last`` resumes the newest run of the
+same configuration, in the same MLflow run.
 """
 
 from __future__ import annotations
 
 import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import hydra
+import lightning as L
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from wdss.paths import CONF_DIR
+from wdss.tracking import RUN_ID_FILE, run_name, run_tags
+
+__all__ = ["ConfigError", "main", "train", "validate"]
 
 
-def main() -> int:
-    print(
-        "wdss.train: training is not available yet: the network, LightningModule and Hydra configs are still "
-        "being built (issues 5 and 6). What works today: `make test`, `python -m wdss.bench wavelets`.",
-        file=sys.stderr,
-    )
-    return 2
+class ConfigError(ValueError):
+    """A configuration that cannot describe a valid run."""
+
+
+def validate(cfg: DictConfig) -> None:
+    """Reject invalid combinations with one clear sentence each."""
+    choices = HydraConfig.get().runtime.choices if HydraConfig.initialized() else {}
+    transform = OmegaConf.select(cfg, "transform.transform")
+    head = OmegaConf.select(cfg, "head.name")
+    baseline = str(OmegaConf.select(cfg, "model.net._target_", default="")).endswith("Upsample")
+    if not baseline and transform == "none" and head in ("fusion_ll", "multi_inr"):
+        raise ConfigError(f"head={head} needs wavelet subbands: it cannot be combined with transform=none")
+    scale = OmegaConf.select(cfg, "scale.train")
+    scale_name = OmegaConf.select(cfg, "scale.name")
+    if scale_name == "fixed" and OmegaConf.is_list(scale):
+        raise ConfigError(f"scale=fixed takes one number, got the list {list(scale)}: use scale=arbitrary for ranges")
+    if scale_name == "arbitrary" and not (OmegaConf.is_list(scale) and len(scale) == 2):
+        raise ConfigError(f"scale=arbitrary takes [low, high], got {scale}: use scale=fixed for one scale")
+    for value in OmegaConf.to_container(cfg.data, resolve=True).get("test_scales", []):
+        if not 1.0 <= float(value) <= 8.0:
+            raise ConfigError(f"data.test_scales must lie in [1, 8], got {value}")
+    temporal = OmegaConf.select(cfg, "temporal.name")
+    if temporal != "recurrent" and OmegaConf.select(cfg, "loss.weights.temporal", default=0):
+        raise ConfigError("loss.weights.temporal > 0 needs temporal=recurrent (consecutive outputs of the model)")
+    if cfg.get("ckpt_path") not in (None, "last") and not Path(str(cfg.ckpt_path)).is_file():
+        raise ConfigError(f"ckpt_path {cfg.ckpt_path} is not a file (use a checkpoint path or 'last')")
+    if choices.get("transform") == "none" and choices.get("basis") not in (None, "db4"):
+        pass  # the basis is ignored and tagged "n/a" (see wdss.tracking.run_tags), not an error
+
+
+def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
+    """``ckpt_path=last``: the newest ``last.ckpt`` of a run with the same name, and that run's MLflow id."""
+    if cfg.get("ckpt_path") != "last":
+        return (str(cfg.ckpt_path) if cfg.get("ckpt_path") else None), None
+    name = run_name(cfg)
+    log_dir = Path(str(cfg.paths.log_dir))
+    candidates = []
+    for ckpt in log_dir.glob("**/checkpoints/last.ckpt"):
+        run_dir = ckpt.parent.parent
+        if _recorded_name(run_dir) == name:
+            candidates.append((ckpt.stat().st_mtime, ckpt, run_dir))
+    if not candidates:
+        print(f"wdss.train: no last.ckpt of a run named {name!r} under {log_dir}: starting from scratch")
+        return None, None
+    _, ckpt, run_dir = max(candidates)
+    run_id = (run_dir / RUN_ID_FILE).read_text().strip() if (run_dir / RUN_ID_FILE).exists() else None
+    print(f"wdss.train: resuming {ckpt}" + (f" in MLflow run {run_id}" if run_id else ""))
+    return str(ckpt), run_id
+
+
+def _recorded_name(run_dir: Path) -> str | None:
+    file = run_dir / "run_name"
+    return file.read_text().strip() if file.exists() else None
+
+
+def _progress_bar() -> L.Callback:
+    from lightning.pytorch.callbacks import RichProgressBar, TQDMProgressBar
+
+    multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
+    if sys.stdout.isatty() and not multirun:
+        return RichProgressBar()
+    return TQDMProgressBar(refresh_rate=20)  # plain lines in logs and sweeps
+
+
+def _flat(config: dict, prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in config.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{name}."))
+        else:
+            out[name] = value
+    return out
+
+
+def train(cfg: DictConfig) -> dict[str, float]:
+    """Fit and test one configuration; returns the final metrics (``val/*``, ``test/*``, ``bench/*``)."""
+    validate(cfg)
+    L.seed_everything(int(cfg.seed), workers=True)
+    output_dir = Path(str(cfg.paths.output_dir))
+    output_dir.mkdir(parents=True, exist_ok=True)
+    ckpt_path, resume_run = _resume(cfg)
+
+    module = instantiate(cfg.model)
+    datamodule = instantiate(cfg.data, inputs=list(module.inputs))
+    name = run_name(cfg)
+    logger = instantiate(cfg.logger, run_name=name, tags=run_tags(cfg), run_id=resume_run)
+    (output_dir / "run_name").write_text(name)
+    (output_dir / RUN_ID_FILE).write_text(logger.run_id)
+    callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [_progress_bar()]
+    trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks)
+
+    resolved = OmegaConf.to_container(cfg, resolve=True)
+    if resume_run is None:
+        logger.log_hyperparams(_flat({k: v for k, v in resolved.items() if k not in ("hydra",)}))
+    experiment, run_id = logger.experiment, logger.run_id
+    experiment.log_text(run_id, OmegaConf.to_yaml(resolved), "config.yaml")
+    hydra_dir = output_dir / ".hydra"
+    if hydra_dir.is_dir():
+        experiment.log_artifacts(run_id, str(hydra_dir), ".hydra")
+
+    metrics: dict[str, float] = {}
+    try:
+        start = time.perf_counter()
+        if module.trainable:
+            trainer.fit(module, datamodule=datamodule, ckpt_path=ckpt_path)
+            experiment.log_metric(run_id, "time/train_s", time.perf_counter() - start)
+            metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
+        if cfg.get("test"):
+            best = getattr(trainer.checkpoint_callback, "best_model_path", "") if module.trainable else ""
+            trainer.test(module, datamodule=datamodule, ckpt_path=best or None, weights_only=True)
+            metrics.update({k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")})
+        metrics.update(_bench(cfg, module, logger))
+    except BaseException:
+        logger.finalize("FAILED")
+        raise
+    return metrics
+
+
+def _bench(cfg: DictConfig, module: Any, logger: Any) -> dict[str, float]:
+    """Inference cost at ``cfg.bench``: median ms and GFLOPs of one forward, logged as ``bench/*``."""
+    from wdss.model.profile import dummy_inputs, flops, forward_ms
+
+    bench = cfg.get("bench")
+    if not bench:
+        return {}
+    net = module.net.eval()
+    inputs = dummy_inputs(net, int(bench.height), int(bench.width), float(bench.scale), str(module.device))
+    total, _ = flops(net, inputs)
+    values = {
+        "bench/ms_per_frame": forward_ms(net, inputs, repeats=int(bench.repeats)),
+        "bench/gflops": total / 1e9,
+        "bench/params_m": sum(p.numel() for p in net.parameters()) / 1e6,
+    }
+    for key, value in values.items():
+        logger.experiment.log_metric(logger.run_id, key, value)
+    return values
+
+
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="train")
+def main(cfg: DictConfig) -> float | None:
+    metrics = train(cfg)
+    output_dir = cfg.paths.output_dir
+    print(f"wdss.train: run {run_name(cfg)!r} done; outputs in {output_dir}")
+    print(f"  MLflow: {OmegaConf.select(cfg, 'logger.tracking_uri')} -- browse with `make ui`")
+    for key in sorted(k for k in metrics if k.startswith(("test/psnr", "bench/"))):
+        print(f"  {key} = {metrics[key]:.4g}")
+    return metrics.get("val/psnr")
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    main()

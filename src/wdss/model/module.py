@@ -219,7 +219,7 @@ class SuperResolutionModule(L.LightningModule):
             self._log_images(batch, out)
 
     def test_step(self, batch: Mapping[str, Any], batch_idx: int, dataloader_idx: int = 0) -> None:
-        self._evaluate(batch, "test", f"@{float(batch['scale'][0]):g}x")
+        self._evaluate(batch, "test", f"_{float(batch['scale'][0]):g}x")  # MLflow forbids '@' in names
 
     # ------------------------------------------------------------------------------------------ images
 

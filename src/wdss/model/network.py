@@ -158,7 +158,8 @@ class WDSSNet(nn.Module):
     ``transform``: ``none | dwt | swt``; ``basis``: an orthogonal PyWavelets basis; ``head``:
     ``shared_inr`` (fusion + INR summed), ``multi_inr`` (one INR MLP per subband), ``fusion_ll`` (fusion
     predicts LL, the INR the details); ``temporal``: whether the temporal branch exists. Widths default to
-    the paper's (~0.57 M parameters with the SWT head).
+    the paper's (~0.57 M parameters with the SWT head). A ``wavelet`` module (as the ``transform`` config
+    group builds it) replaces ``transform`` and ``basis``.
     """
 
     def __init__(
@@ -179,8 +180,13 @@ class WDSSNet(nn.Module):
         multi_inr_width: int = 32,
         final_relu: bool = True,
         input_log: bool = True,
+        wavelet: WaveletTransform | None = None,
     ) -> None:
         super().__init__()
+        if wavelet is not None:  # a configured transform module (conf/transform/*.yaml) names both
+            if wavelet.level != 1:
+                raise ValueError(f"the network heads use one wavelet level, got level={wavelet.level}")
+            transform, basis = wavelet.transform, wavelet.wavelet
         if head not in HEADS:
             raise ValueError(f"model.head must be one of {', '.join(HEADS)}, got {head!r}")
         if head != "shared_inr" and transform == "none":

@@ -1,0 +1,120 @@
+"""MLflow tracking: the logger of a run, its tags and artifacts, and one parent run per sweep.
+
+Runs are named by their overrides (``basis=db4,transform=swt``) and tagged with every config-group choice
+(``transform``, ``basis``, ``head``, ``scale``, ``temporal``, ``model``, ``data``, ...), the seed and the git
+commit, so the MLflow UI can group and compare them. A multirun gets a parent run (created by the Hydra
+callback :class:`SweepParentRun`) and every job is nested under it.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+from typing import Any
+
+from hydra.core.hydra_config import HydraConfig
+from hydra.experimental.callback import Callback
+from hydra.types import RunMode
+from omegaconf import DictConfig, OmegaConf
+
+__all__ = ["PARENT_FILE", "RUN_ID_FILE", "SweepParentRun", "git_commit", "run_name", "run_tags"]
+
+PARENT_FILE = "mlflow_parent_run_id"  # in the sweep directory
+RUN_ID_FILE = "mlflow_run_id"  # in a run's output directory: lets ckpt_path=last resume the same run
+GROUPS = ("transform", "basis", "head", "scale", "temporal", "model", "loss", "data", "trainer", "experiment")
+
+
+def git_commit(root: str | Path = ".") -> str:
+    """The commit of the working tree (with ``-dirty`` when it has changes), or ``unknown``."""
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=True)
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return commit.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
+
+
+def _hydra() -> Any | None:
+    return HydraConfig.get() if HydraConfig.initialized() else None
+
+
+def run_name(cfg: DictConfig) -> str:
+    """``cfg.run_name``, else the job's overrides (without seeds and paths), else ``default``."""
+    if cfg.get("run_name"):
+        return str(cfg.run_name)
+    hydra = _hydra()
+    name = hydra.job.override_dirname if hydra is not None else ""
+    return name or "default"
+
+
+def run_tags(cfg: DictConfig) -> dict[str, str]:
+    """A tag per config-group choice, the seed, the git commit, and the sweep parent when there is one."""
+    tags: dict[str, str] = {}
+    hydra = _hydra()
+    if hydra is not None:
+        for group in GROUPS:
+            choice = hydra.runtime.choices.get(group)
+            if choice is not None:
+                tags[group] = str(choice)
+        if hydra.mode == RunMode.MULTIRUN:
+            parent = Path(hydra.sweep.dir) / PARENT_FILE
+            if parent.exists():
+                tags["mlflow.parentRunId"] = parent.read_text().strip()
+            tags["sweep"] = hydra.job.config_name
+            tags["job"] = str(hydra.job.num)
+    if tags.get("transform") == "none":
+        tags["basis"] = "n/a (transform=none)"  # the basis is ignored without a wavelet transform
+    net_target = str(OmegaConf.select(cfg, "model.net._target_", default=""))
+    if net_target.endswith("Upsample"):  # baselines have no wavelet, head or temporal branch
+        for key in ("transform", "basis", "head", "temporal", "scale"):
+            tags[key] = "n/a (baseline)"
+    tags["seed"] = str(cfg.get("seed"))
+    tags["git_commit"] = git_commit(OmegaConf.select(cfg, "paths.root_dir", default="."))
+    tags.update({str(k): str(v) for k, v in (cfg.get("tags") or {}).items()})
+    return tags
+
+
+class SweepParentRun(Callback):
+    """Hydra callback: one MLflow parent run per multirun; jobs nest under it (``mlflow.parentRunId``)."""
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        from mlflow import MlflowClient
+
+        uri = _tracking_uri(config)
+        client = MlflowClient(uri)
+        name = str(OmegaConf.select(config, "experiment_name", default="wdss"))
+        experiment = client.get_experiment_by_name(name)
+        experiment_id = experiment.experiment_id if experiment else client.create_experiment(name)
+        sweep_dir = Path(config.hydra.sweep.dir)
+        sweep_dir.mkdir(parents=True, exist_ok=True)
+        sweep_name = config.hydra.job.config_name
+        run = client.create_run(
+            experiment_id,
+            run_name=f"sweep {sweep_name}",
+            tags={
+                "sweep": sweep_name,
+                "sweep_dir": str(sweep_dir),
+                "git_commit": git_commit(),
+                "overrides": " ".join(config.hydra.overrides.task),
+            },
+        )
+        (sweep_dir / PARENT_FILE).write_text(run.info.run_id)
+
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        from mlflow import MlflowClient
+
+        parent = Path(config.hydra.sweep.dir) / PARENT_FILE
+        if parent.exists():
+            MlflowClient(_tracking_uri(config)).set_terminated(parent.read_text().strip(), "FINISHED")
+
+
+def _tracking_uri(config: DictConfig) -> str:
+    root = OmegaConf.select(config, "paths.root_dir", default=".")
+    return os.environ.get("MLFLOW_TRACKING_URI", f"sqlite:///{root}/mlflow.db")
