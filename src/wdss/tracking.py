@@ -22,7 +22,19 @@ __all__ = ["PARENT_FILE", "RUN_ID_FILE", "SweepParentRun", "git_commit", "run_na
 
 PARENT_FILE = "mlflow_parent_run_id"  # in the sweep directory
 RUN_ID_FILE = "mlflow_run_id"  # in a run's output directory: lets ckpt_path=last resume the same run
-GROUPS = ("transform", "basis", "head", "scale", "temporal", "model", "loss", "data", "trainer", "experiment")
+GROUPS = (
+    "variant",
+    "transform",
+    "basis",
+    "head",
+    "scale",
+    "temporal",
+    "model",
+    "loss",
+    "data",
+    "trainer",
+    "experiment",
+)
 
 
 def git_commit(root: str | Path = ".") -> str:

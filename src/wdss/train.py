@@ -131,12 +131,13 @@ def train(cfg: DictConfig) -> dict[str, float]:
     metrics: dict[str, float] = {}
     try:
         start = time.perf_counter()
-        if module.trainable:
+        if module.trainable and cfg.get("fit", True):
             trainer.fit(module, datamodule=datamodule, ckpt_path=ckpt_path)
             experiment.log_metric(run_id, "time/train_s", time.perf_counter() - start)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
         if cfg.get("test"):
-            best = getattr(trainer.checkpoint_callback, "best_model_path", "") if module.trainable else ""
+            fitted = module.trainable and cfg.get("fit", True)
+            best = getattr(trainer.checkpoint_callback, "best_model_path", "") if fitted else ""
             trainer.test(module, datamodule=datamodule, ckpt_path=best or None, weights_only=True)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")})
         metrics.update(_bench(cfg, module, logger))
