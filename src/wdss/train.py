@@ -119,9 +119,9 @@ def train(cfg: DictConfig) -> dict[str, float]:
     callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [_progress_bar()]
     trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks)
 
-    resolved = OmegaConf.to_container(cfg, resolve=True)
+    resolved = OmegaConf.to_container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]), resolve=True)
     if resume_run is None:
-        logger.log_hyperparams(_flat({k: v for k, v in resolved.items() if k not in ("hydra",)}))
+        logger.log_hyperparams(_flat(resolved))
     experiment, run_id = logger.experiment, logger.run_id
     experiment.log_text(run_id, OmegaConf.to_yaml(resolved), "config.yaml")
     hydra_dir = output_dir / ".hydra"
@@ -135,6 +135,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
             trainer.fit(module, datamodule=datamodule, ckpt_path=ckpt_path)
             experiment.log_metric(run_id, "time/train_s", time.perf_counter() - start)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
+            metrics["trainer/global_step"] = float(trainer.global_step)
         if cfg.get("test"):
             fitted = module.trainable and cfg.get("fit", True)
             best = getattr(trainer.checkpoint_callback, "best_model_path", "") if fitted else ""

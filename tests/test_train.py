@@ -1,0 +1,213 @@
+"""Configs compose for every option of every group; train(cfg) runs end to end with MLflow; resume; sweeps."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import OmegaConf, open_dict
+
+from wdss.paths import CONF_DIR, PROJECT_ROOT
+from wdss.train import ConfigError, train, validate
+
+GROUPS = (
+    "transform",
+    "basis",
+    "head",
+    "scale",
+    "temporal",
+    "model",
+    "loss",
+    "data",
+    "trainer",
+    "callbacks",
+    "logger",
+    "experiment",
+    "variant",
+    "debug",
+)
+SWEEPS = PROJECT_ROOT / "sweeps"
+
+
+def options(group: str) -> list[str]:
+    return sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
+
+
+def compose_train(overrides: list[str], tmp_path: Path | None = None, config_dir: Path = CONF_DIR, name="train"):
+    with initialize_config_dir(config_dir=str(config_dir), version_base="1.3"):
+        cfg = compose(name, overrides=overrides, return_hydra_config=True)
+    HydraConfig.instance().set_config(cfg)
+    if tmp_path is not None:
+        with open_dict(cfg):
+            cfg.paths.root_dir = str(PROJECT_ROOT)
+            cfg.paths.output_dir = str(tmp_path / "run")
+            cfg.paths.log_dir = str(tmp_path)
+    return cfg
+
+
+def invalid(cfg) -> str | None:
+    try:
+        validate(cfg)
+    except ConfigError as err:
+        return str(err)
+    return None
+
+
+@pytest.mark.parametrize("group", GROUPS)
+def test_every_option_of_every_group_composes(group, tmp_path):
+    assert options(group), group
+    for option in options(group):
+        cfg = compose_train([f"{group}={option}"], tmp_path)
+        OmegaConf.to_container(cfg.model, resolve=True)  # every interpolation resolves
+        OmegaConf.to_container(cfg.data, resolve=True)
+        message = invalid(cfg)
+        assert message is None, f"{group}={option}: {message}"
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        (["transform=none", "head=fusion_ll"], "head=fusion_ll needs wavelet subbands"),
+        (["transform=none", "head=multi_inr"], "head=multi_inr needs wavelet subbands"),
+        (["scale=fixed", "scale.train=[2,3]"], "scale=fixed takes one number"),
+        (["scale=arbitrary", "scale.train=2.0"], "scale=arbitrary takes"),
+        (["data.test_scales=[2,9]"], r"test_scales must lie in \[1, 8\]"),
+        (["loss.weights.temporal=0.3"], "needs temporal=recurrent"),
+        (["ckpt_path=/no/such.ckpt"], "is not a file"),
+    ],
+)
+def test_invalid_combinations_are_one_clear_sentence(overrides, message, tmp_path):
+    with pytest.raises(ConfigError, match=message):
+        validate(compose_train(overrides, tmp_path))
+
+
+def test_unknown_keys_and_options_are_hydra_errors(tmp_path):
+    from hydra.errors import ConfigCompositionException
+
+    with pytest.raises(ConfigCompositionException):
+        compose_train(["transform=fft"], tmp_path)
+    with pytest.raises(ConfigCompositionException):
+        compose_train(["data.pach_size=3"], tmp_path)
+
+
+@pytest.mark.parametrize("sweep", sorted(p.stem for p in SWEEPS.glob("*.yaml")))
+def test_every_sweep_job_composes_and_validates(sweep, tmp_path, monkeypatch):
+    """Expand each sweep's parameter grid as Hydra's basic sweeper would and validate every job."""
+    import itertools
+
+    monkeypatch.chdir(PROJECT_ROOT)
+    base = compose_train([], tmp_path, config_dir=SWEEPS, name=sweep)
+    params = base.hydra.sweeper.params
+    axes = [[f"{k}={v.strip()}" for v in str(values).split(",")] for k, values in params.items()]
+    jobs = list(itertools.product(*axes))
+    assert jobs
+    for job in jobs:
+        cfg = compose_train(list(job), tmp_path, config_dir=SWEEPS, name=sweep)
+        assert invalid(cfg) is None, job
+        OmegaConf.to_container(cfg.model, resolve=True)
+
+
+def test_baseline_rows_replace_the_model_of_an_experiment(tmp_path):
+    cfg = compose_train(["experiment=smoke", "variant=bicubic"], tmp_path)
+    assert cfg.model.net._target_ == "wdss.model.baselines.Upsample" and cfg.model.net.mode == "bicubic"
+
+
+@pytest.fixture
+def tracking(tmp_path, monkeypatch):
+    uri = f"sqlite:///{tmp_path}/mlflow.db"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    monkeypatch.setenv("MLFLOW_DISABLE_TELEMETRY", "true")
+    from mlflow import MlflowClient
+
+    return MlflowClient(uri)
+
+
+def test_smoke_training_end_to_end_in_process(tmp_path, tracking):
+    cfg = compose_train(["experiment=smoke", "variant=swt_db4", "model.flip=true"], tmp_path)
+    metrics = train(cfg)
+    for key in ("val/psnr", "test/psnr_2x", "test/ssim_3x", "test/flip_4x", "bench/ms_per_frame", "bench/gflops"):
+        assert key in metrics, key
+    assert (tmp_path / "run" / "checkpoints" / "last.ckpt").exists()
+    runs = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
+    assert len(runs) == 1
+    run = runs[0]
+    assert run.info.status == "FINISHED"
+    assert {run.data.tags[k] for k in ("transform", "basis", "head", "variant")} == {
+        "swt",
+        "db4",
+        "shared_inr",
+        "swt_db4",
+    }
+    artifacts = {a.path for a in tracking.list_artifacts(run.info.run_id)}
+    assert {"config.yaml", "images", "test"} <= artifacts
+    assert "time/train_s" in run.data.metrics and run.data.params["model.net.head"] == "shared_inr"
+
+
+def test_resume_from_last_continues_the_same_run(tmp_path, tracking):
+    first = compose_train(["experiment=smoke", "transform=dwt", "trainer.max_epochs=1", "test=false"], tmp_path)
+    train(first)
+    assert (tmp_path / "run" / "checkpoints" / "last.ckpt").exists()
+    second = compose_train(
+        ["experiment=smoke", "transform=dwt", "trainer.max_epochs=2", "test=false", "ckpt_path=last"],
+        tmp_path / "again",
+    )
+    with open_dict(second):
+        second.paths.log_dir = str(tmp_path)  # where the first run lives
+    metrics = train(second)
+    assert metrics["trainer/global_step"] == 2  # one batch per epoch: epoch 0 restored, epoch 1 trained
+    runs = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
+    assert len(runs) == 1  # the resumed training logged into the same MLflow run
+    steps = sorted(m.step for m in tracking.get_metric_history(runs[0].info.run_id, "train/loss"))
+    assert steps == [0, 1]  # step 0 from the first run, step 1 after resuming: nothing trained twice
+
+
+@pytest.mark.slow
+def test_a_tiny_sweep_nests_its_runs_and_reports(tmp_path):
+    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db", "MLFLOW_DISABLE_TELEMETRY": "true"}
+    command = [
+        sys.executable,
+        "-m",
+        "wdss.train",
+        "-cd",
+        "sweeps",
+        "-cn",
+        "ablation_wavelet",
+        "experiment=smoke",
+        "variant=none,swt_haar,bilinear_demodulated",
+        "seed=0",
+        f"paths.log_dir={tmp_path}/outputs",
+        "model.flip=true",
+    ]
+    done = subprocess.run(command, cwd=PROJECT_ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = subprocess.run(
+        [sys.executable, "-m", "wdss.report", "--sweep", "ablation_wavelet", "--out", str(tmp_path / "reports")],
+        cwd=PROJECT_ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert report.returncode == 0, report.stderr[-3000:]
+    out = tmp_path / "reports" / "ablation_wavelet"
+    table = (out / "table.md").read_text()
+    for row in ("none", "swt_haar", "bilinear_demodulated"):
+        assert f"| {row} |" in table
+    assert (out / "tradeoff.png").stat().st_size > 0 and (out / "qualitative.png").stat().st_size > 0
+    from mlflow import MlflowClient
+
+    client = MlflowClient(env["MLFLOW_TRACKING_URI"])
+    runs = client.search_runs([client.get_experiment_by_name("ablation_wavelet").experiment_id])
+    parents = [r for r in runs if "mlflow.parentRunId" not in r.data.tags]
+    children = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == parents[0].info.run_id]
+    assert len(parents) == 1 and len(children) == 3
+    assert {a.path for a in client.list_artifacts(parents[0].info.run_id, "report")} >= {
+        "report/table.md",
+        "report/table.csv",
+        "report/tradeoff.png",
+    }
