@@ -211,3 +211,29 @@ def test_a_tiny_sweep_nests_its_runs_and_reports(tmp_path):
         "report/table.csv",
         "report/tradeoff.png",
     }
+
+
+def test_eval_rebuilds_from_the_checkpoint_and_logs_into_the_training_run(tmp_path, tracking):
+    from wdss.eval import evaluate
+
+    train(compose_train(["experiment=smoke", "variant=dwt_haar", "test=false"], tmp_path))
+    ckpt = tmp_path / "run" / "checkpoints" / "last.ckpt"
+    cfg = compose_train(
+        [
+            f"ckpt_path={ckpt}",
+            "data=fixture",
+            "data.test_scales=[2.0,2.5]",
+            "write_outputs=true",
+            "bench.height=48",
+            "bench.width=96",
+            "bench.repeats=1",
+        ],
+        tmp_path / "eval",
+        name="eval",
+    )
+    metrics = evaluate(cfg)
+    assert {"test/psnr_2x", "test/psnr_2.5x", "bench/ms_per_frame"} <= set(metrics)
+    runs = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
+    assert len(runs) == 1 and "test/psnr_2.5x" in runs[0].data.metrics
+    frames = sorted(p.name for p in (tmp_path / "eval" / "run" / "frames").iterdir())
+    assert "fixture_000_0001_2.5x.exr" in frames and "fixture_000_0001_2.5x.png" in frames

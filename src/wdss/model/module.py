@@ -218,12 +218,13 @@ class SuperResolutionModule(L.LightningModule):
         ):
             self._log_images(batch, out)
 
-    def test_step(self, batch: Mapping[str, Any], batch_idx: int, dataloader_idx: int = 0) -> None:
+    def test_step(self, batch: Mapping[str, Any], batch_idx: int, dataloader_idx: int = 0) -> dict[str, Tensor]:
         label = f"{float(batch['scale'][0]):g}x"
         out = self._evaluate(batch, "test", f"_{label}")  # MLflow forbids '@' in metric names
         if batch_idx == 0:  # the first test frame of every scale, for the report's qualitative figure
             self._log_frame(tonemap(out["color"][:1].float(), self.hparams.tonemap_name), f"test/pred_{label}.png")
             self._log_frame(tonemap(batch["target"][:1].float(), self.hparams.tonemap_name), f"test/target_{label}.png")
+        return {"color": out["color"].detach()}
 
     def _log_frame(self, image: Tensor, artifact_file: str) -> None:
         experiment, run_id = getattr(self.logger, "experiment", None), getattr(self.logger, "run_id", None)

@@ -1,0 +1,87 @@
+"""Evaluation entry point: ``python -m wdss.eval ckpt_path=PATH [data=...] [write_outputs=true]``.
+
+Rebuilds the model from the checkpoint alone (``weights_only=True``), tests it on full frames of every test
+scene at every scale of ``data.test_scales``, logs the metrics and the inference cost into the MLflow run
+that trained it (found beside the checkpoint), and optionally writes every prediction as linear EXR and
+tone-mapped PNG.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import hydra
+import lightning as L
+import numpy as np
+from hydra.utils import instantiate
+from omegaconf import DictConfig
+
+from wdss.data.exr import write_exr
+from wdss.data.tonemap import tonemap
+from wdss.model.module import SuperResolutionModule
+from wdss.paths import CONF_DIR
+from wdss.tracking import RUN_ID_FILE
+
+__all__ = ["WritePredictions", "evaluate", "main"]
+
+
+class WritePredictions(L.Callback):
+    """Write each test prediction as ``<scene>_<frame>_<scale>x.exr`` (linear) and ``.png`` (tone-mapped)."""
+
+    def __init__(self, out_dir: str | Path, tonemap_name: str = "hable") -> None:
+        self.out_dir = Path(out_dir)
+        self.tonemap_name = tonemap_name
+
+    def on_test_batch_end(
+        self, trainer, pl_module, outputs: Any, batch: Any, batch_idx: int, dataloader_idx: int = 0
+    ) -> None:
+        from PIL import Image
+
+        if not outputs or "color" not in outputs:
+            return
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        scale = f"{float(batch['scale'][0]):g}x"
+        for index, color in enumerate(outputs["color"].detach().float().cpu()):
+            stem = f"{batch['sequence'][index]}_{int(batch['frame'][index]):04d}_{scale}"
+            write_exr(self.out_dir / f"{stem}.exr", dict(zip("RGB", color.numpy(), strict=True)))
+            ldr = tonemap(color[None], self.tonemap_name)[0].permute(1, 2, 0).numpy()
+            Image.fromarray((ldr * 255).round().astype(np.uint8)).save(self.out_dir / f"{stem}.png")
+
+
+def training_run_id(ckpt_path: Path) -> str | None:
+    """The MLflow run that wrote a checkpoint (``<run dir>/checkpoints/x.ckpt`` beside ``mlflow_run_id``)."""
+    file = ckpt_path.resolve().parent.parent / RUN_ID_FILE
+    return file.read_text().strip() if file.exists() else None
+
+
+def evaluate(cfg: DictConfig) -> dict[str, float]:
+    ckpt = Path(str(cfg.ckpt_path))
+    if not ckpt.is_file():
+        raise FileNotFoundError(f"ckpt_path {ckpt} is not a file")
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
+    datamodule = instantiate(cfg.data, inputs=list(module.inputs))
+    run_id = training_run_id(ckpt)
+    logger = instantiate(cfg.logger, run_id=run_id, run_name=None if run_id else f"eval {ckpt.name}")
+    callbacks = []
+    if cfg.get("write_outputs"):
+        callbacks.append(WritePredictions(Path(str(cfg.paths.output_dir)) / "frames", module.hparams.tonemap_name))
+    trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks, enable_checkpointing=False)
+    trainer.test(module, datamodule=datamodule)
+    metrics = {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")}
+    from wdss.train import _bench
+
+    metrics.update(_bench(cfg, module, logger))
+    print(f"wdss.eval: {ckpt} -> MLflow run {logger.run_id}")
+    for key in sorted(metrics):
+        print(f"  {key} = {metrics[key]:.4g}")
+    return metrics
+
+
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="eval")
+def main(cfg: DictConfig) -> None:
+    evaluate(cfg)
+
+
+if __name__ == "__main__":
+    main()
