@@ -242,9 +242,10 @@ def test_the_default_data_config_instantiates():
     from wdss.render import render_preset
 
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        cfg = compose(overrides=["+data=mini", "+data.inputs=[lr,target]"])
-    dm = instantiate(cfg.data)
+        cfg = compose("train", overrides=["data=mini", "paths.root_dir=/project"])
+    dm = instantiate(cfg.data, inputs=["lr", "target"])
     assert isinstance(dm, SceneDataModule) and dm.inputs == ("lr", "target") and dm.scale == (2.0, 4.0)
+    assert str(dm.root) == "/project/data/mini"
     assert dm.prepare.func is render_preset and dm.prepare.keywords == {"name": "mini"}
 
 

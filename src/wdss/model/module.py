@@ -35,6 +35,7 @@ class SuperResolutionModule(L.LightningModule):
     ``{"irradiance", "coefficients"}`` (:class:`~wdss.model.network.WDSSNet`, a baseline) or such a module.
     ``loss_weights``: see :class:`~wdss.model.losses.WDSSLoss`. ``optimizer``/``scheduler``: ``_partial_``
     ``_target_`` mappings. ``lpips``: ``{"backbone": path, "linear": path}`` of local weight files, or None.
+    ``temporal``: ``gt_history``, ``recurrent`` or ``none`` (default: whatever the network's branch implies).
     """
 
     def __init__(
@@ -48,7 +49,7 @@ class SuperResolutionModule(L.LightningModule):
         lpips: Mapping[str, str] | None = None,
         image_every_n_epochs: int = 1,
         trainable: bool = True,
-        temporal: str = "gt_history",
+        temporal: str | None = None,
         detach_history: bool = False,
     ) -> None:
         super().__init__()
@@ -70,6 +71,9 @@ class SuperResolutionModule(L.LightningModule):
         else:
             hparams["net"] = _plain(net)
             self.net = instantiate(hparams["net"])
+        if temporal is None:  # follow the network: a temporal branch trains on ground-truth history by default
+            temporal = "gt_history" if "history" in getattr(self.net, "inputs", ()) else "none"
+            hparams["temporal"] = temporal
         self.save_hyperparameters(hparams)
         lpips_model = LPIPS(lpips["backbone"], lpips["linear"]) if lpips else None
         self.criterion = WDSSLoss(hparams["loss_weights"], lpips=lpips_model)
