@@ -8,6 +8,7 @@ callback :class:`SweepParentRun`) and every job is nested under it.
 
 from __future__ import annotations
 
+import atexit
 import os
 import subprocess
 from pathlib import Path
@@ -118,13 +119,28 @@ class SweepParentRun(Callback):
             },
         )
         (sweep_dir / PARENT_FILE).write_text(run.info.run_id)
+        # Hydra skips on_multirun_end when a job failed (it re-raises after running the others): close then too.
+        atexit.register(self._close, uri, run.info.run_id)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
-        from mlflow import MlflowClient
-
         parent = Path(config.hydra.sweep.dir) / PARENT_FILE
         if parent.exists():
-            MlflowClient(_tracking_uri(config)).set_terminated(parent.read_text().strip(), "FINISHED")
+            self._close(_tracking_uri(config), parent.read_text().strip())
+
+    @staticmethod
+    def _close(uri: str, run_id: str) -> None:
+        """End the parent run once, noting how many jobs failed (their cells are marked in the report)."""
+        from mlflow import MlflowClient
+
+        client = MlflowClient(uri)
+        if client.get_run(run_id).info.status != "RUNNING":
+            return
+        experiment = client.get_run(run_id).info.experiment_id
+        jobs = client.search_runs([experiment], filter_string=f"tags.mlflow.parentRunId = '{run_id}'")
+        failed = sum(j.info.status != "FINISHED" for j in jobs)
+        client.set_tag(run_id, "jobs", str(len(jobs)))
+        client.set_tag(run_id, "failed_jobs", str(failed))
+        client.set_terminated(run_id, "FINISHED")
 
 
 def _tracking_uri(config: DictConfig) -> str:
