@@ -1,5 +1,6 @@
 """Training losses, each term weighted by config, on remodulated linear HDR colour (REFERENCE.md section 6).
 
+The image terms compare linear HDR colour by default, or ``log1p`` of it (``space="log"``).
 Terms: ``wavelet`` (L1 between predicted coefficients and the analysis of the target irradiance),
 ``l1``, ``ssim`` (1 - SSIM), ``masked_l1`` (L1 inside the spatial mask), ``temporal`` (the change between
 consecutive outputs against the change between consecutive targets, both previous frames warped; it needs
@@ -30,8 +31,11 @@ def temporal_difference_loss(output: Tensor, warped_output_prev: Tensor, target:
 class WDSSLoss(nn.Module):
     """Weighted sum of the loss terms; ``weights`` maps term names to weights (0 or absent: off)."""
 
-    def __init__(self, weights: Mapping[str, float], lpips: nn.Module | None = None) -> None:
+    def __init__(self, weights: Mapping[str, float], lpips: nn.Module | None = None, space: str = "linear") -> None:
         super().__init__()
+        if space not in ("linear", "log"):
+            raise ValueError(f"loss.space must be 'linear' or 'log', got {space!r}")
+        self.space = space
         unknown = set(weights) - set(LOSS_TERMS)
         if unknown:
             raise ValueError(f"unknown loss terms {sorted(unknown)}: expected some of {', '.join(LOSS_TERMS)}")
@@ -54,8 +58,16 @@ class WDSSLoss(nn.Module):
         spatial_mask: Tensor | None = None,
         temporal: tuple[Tensor, Tensor] | None = None,
     ) -> dict[str, Tensor]:
-        """The terms and their weighted ``total``. ``output``/``target``: remodulated linear HDR colour."""
+        """The terms and their weighted ``total``. ``output``/``target``: remodulated linear HDR colour.
+
+        With ``space="log"`` the image terms compare ``log1p`` of the colours (DFASR's choice: highlights no
+        longer dominate); the wavelet term always compares linear irradiance coefficients.
+        """
         terms: dict[str, Tensor] = {}
+        if self.space == "log":
+            output, target = torch.log1p(output.clamp_min(0)), torch.log1p(target.clamp_min(0))
+            if temporal is not None:
+                temporal = (torch.log1p(temporal[0].clamp_min(0)), torch.log1p(temporal[1].clamp_min(0)))
         w = self.weights
         if "l1" in w:
             terms["l1"] = F.l1_loss(output, target)

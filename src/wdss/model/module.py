@@ -51,6 +51,7 @@ class SuperResolutionModule(L.LightningModule):
         trainable: bool = True,
         temporal: str | None = None,
         detach_history: bool = False,
+        loss_space: str = "linear",
     ) -> None:
         super().__init__()
         # Plain containers only: checkpoints then load with weights_only=True and rebuild the network.
@@ -65,6 +66,7 @@ class SuperResolutionModule(L.LightningModule):
             "trainable": trainable,
             "temporal": temporal,
             "detach_history": detach_history,
+            "loss_space": loss_space,
         }
         if isinstance(net, nn.Module):
             self.net = net
@@ -76,7 +78,7 @@ class SuperResolutionModule(L.LightningModule):
             hparams["temporal"] = temporal
         self.save_hyperparameters(hparams)
         lpips_model = LPIPS(lpips["backbone"], lpips["linear"]) if lpips else None
-        self.criterion = WDSSLoss(hparams["loss_weights"], lpips=lpips_model)
+        self.criterion = WDSSLoss(hparams["loss_weights"], lpips=lpips_model, space=loss_space)
         self.metrics = ImageMetrics(tonemap_name, flip=flip, lpips=lpips_model)
         self.optimizer_config = hparams["optimizer"]
         self.scheduler_config = hparams["scheduler"]
