@@ -241,3 +241,38 @@ def test_eval_rebuilds_from_the_checkpoint_and_logs_into_the_training_run(tmp_pa
     assert len(runs) == 1 and "test/psnr_2.5x" in runs[0].data.metrics
     frames = sorted(p.name for p in (tmp_path / "eval" / "run" / "frames").iterdir())
     assert "fixture_000_0001_2.5x.exr" in frames and "fixture_000_0001_2.5x.png" in frames
+
+
+def test_ema_weight_averaging_runs(tmp_path, tracking):
+    metrics = train(
+        compose_train(["experiment=smoke", "callbacks=ema", "callbacks.ema.decay=0.9", "test=false"], tmp_path)
+    )
+    assert "val/psnr" in metrics
+
+
+@pytest.mark.slow
+def test_parallel_jobs_against_one_sqlite_file_lose_no_run(tmp_path):
+    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db", "MLFLOW_DISABLE_TELEMETRY": "true"}
+    command = [
+        sys.executable,
+        "-m",
+        "wdss.train",
+        "-cd",
+        "sweeps",
+        "-cn",
+        "ablation_wavelet",
+        "experiment=smoke",
+        "variant=none,dwt_haar",
+        "seed=0,1",
+        "hydra/launcher=parallel",
+        f"paths.log_dir={tmp_path}/outputs",
+    ]
+    done = subprocess.run(command, cwd=PROJECT_ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    from mlflow import MlflowClient
+
+    client = MlflowClient(env["MLFLOW_TRACKING_URI"])
+    runs = client.search_runs([client.get_experiment_by_name("ablation_wavelet").experiment_id])
+    children = [r for r in runs if "mlflow.parentRunId" in r.data.tags]
+    assert len(children) == 4 and all(r.info.status == "FINISHED" for r in children)
+    assert all({"test/psnr_2x", "val/psnr", "bench/gflops"} <= set(r.data.metrics) for r in children)

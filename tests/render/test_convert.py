@@ -115,3 +115,13 @@ def test_render_sequences_lets_a_sequence_override_shared_settings(monkeypatch, 
     monkeypatch.setattr(sequence, "render_sequence", lambda out, name, seed, **kw: calls.append((name, seed, kw)))
     sequence.render_sequences(tmp_path, [{"name": "a", "seed": 1}, {"name": "b", "seed": 2, "frames": 5}], frames=9)
     assert [(name, seed, kw["frames"]) for name, seed, kw in calls] == [("a", 1, 9), ("b", 2, 5)]
+
+
+def test_rendering_without_bpy_says_which_command_installs_it(monkeypatch):
+    import importlib
+    import sys
+
+    monkeypatch.setitem(sys.modules, "bpy", None)  # as if the render extra were not installed
+    monkeypatch.delitem(sys.modules, "wdss.render.blender", raising=False)
+    with pytest.raises(ImportError, match="make setup-render"):
+        importlib.import_module("wdss.render.blender")
