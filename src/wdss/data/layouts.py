@@ -141,30 +141,35 @@ class Source:
 
 
 class SceneLayout(ABC):
-    """A naming convention: resolution folders and the slot of every buffer."""
+    """A naming convention: resolution folders (``_FOLDER``, height in its last group) and buffer slots."""
 
     name: str
+    SLOTS: dict[str, Slot]
+    _FOLDER: re.Pattern
 
     @classmethod
-    @abstractmethod
     def matches(cls, names: list[str]) -> bool:
         """Whether a sequence's file list follows this layout."""
+        return any(cls._FOLDER.match(n.split("/", 1)[0]) for n in names if "/" in n)
 
-    @abstractmethod
     def resolutions(self, names: list[str]) -> list[int]:
         """The heights of the resolutions present, largest first."""
+        folders = (self._FOLDER.match(n.split("/", 1)[0]) for n in names if "/" in n)
+        return sorted({int(m.group(m.lastindex)) for m in folders if m}, reverse=True)
 
     @abstractmethod
-    def locate(self, buffer: str, height: int, frame: int, index: dict) -> tuple[str, Slot] | None:
-        """The file (relative name) and slot of ``buffer`` at ``height`` for ``frame``, or None if absent."""
+    def index(self, names: list[str]) -> dict:
+        """A lookup table ``(height, stem, frame) -> file`` built once from the file list."""
 
     @abstractmethod
     def expected(self, buffer: str, height: int, frame: int) -> str:
         """The file a buffer would be in, for error messages."""
 
-    @abstractmethod
-    def index(self, names: list[str]) -> dict:
-        """A lookup table built once from the file list."""
+    def locate(self, buffer: str, height: int, frame: int, index: dict) -> tuple[str, Slot] | None:
+        """The file (relative name) and slot of ``buffer`` at ``height`` for ``frame``, or None if absent."""
+        slot = self.SLOTS[buffer]
+        name = index.get((height, slot.stem, frame))
+        return (name, slot) if name else None
 
     def frames(self, index: dict, height: int) -> list[int]:
         return sorted({frame for (folder_height, _, frame) in index if folder_height == height})
@@ -187,13 +192,6 @@ class UnrealLayout(SceneLayout):
     }
     _FOLDER = re.compile(r"^(\d+)P$")
 
-    @classmethod
-    def matches(cls, names: list[str]) -> bool:
-        return any(cls._FOLDER.match(n.split("/", 1)[0]) for n in names if "/" in n)
-
-    def resolutions(self, names: list[str]) -> list[int]:
-        return sorted({int(m.group(1)) for n in names if (m := self._FOLDER.match(n.split("/", 1)[0]))}, reverse=True)
-
     def index(self, names: list[str]) -> dict:
         table = {}
         for name in names:
@@ -202,11 +200,6 @@ class UnrealLayout(SceneLayout):
             if folder_match and file_match:
                 table[(int(folder_match.group(1)), file_match.group("stem"), int(file_match.group("frame")))] = name
         return table
-
-    def locate(self, buffer: str, height: int, frame: int, index: dict) -> tuple[str, Slot] | None:
-        slot = self.SLOTS[buffer]
-        name = index.get((height, slot.stem, frame))
-        return (name, slot) if name else None
 
     def expected(self, buffer: str, height: int, frame: int) -> str:
         return f"{height}P/{self.SLOTS[buffer].stem}.{frame:04d}.exr"
@@ -230,13 +223,6 @@ class DFASRLayout(SceneLayout):
     _FOLDER = re.compile(r"^(GBuffer|Nojitter)-(\d+)P$")
     _STEMS = sorted({s.stem for s in SLOTS.values()}, key=len, reverse=True)
 
-    @classmethod
-    def matches(cls, names: list[str]) -> bool:
-        return any(cls._FOLDER.match(n.split("/", 1)[0]) for n in names if "/" in n)
-
-    def resolutions(self, names: list[str]) -> list[int]:
-        return sorted({int(m.group(2)) for n in names if (m := self._FOLDER.match(n.split("/", 1)[0]))}, reverse=True)
-
     def index(self, names: list[str]) -> dict:
         table: dict = {}
         for name in names:
@@ -253,11 +239,6 @@ class DFASRLayout(SceneLayout):
             if kind == "GBuffer" or key not in table:
                 table[key] = name
         return table
-
-    def locate(self, buffer: str, height: int, frame: int, index: dict) -> tuple[str, Slot] | None:
-        slot = self.SLOTS[buffer]
-        name = index.get((height, slot.stem, frame))
-        return (name, slot) if name else None
 
     def expected(self, buffer: str, height: int, frame: int) -> str:
         folder = "Nojitter" if buffer == "color" else "GBuffer or Nojitter"
