@@ -320,7 +320,7 @@ class Sequence:
                 raise SceneError(
                     f"sequence {self.name!r}, frame {frame}: buffer {buffer!r} is missing at {height}P "
                     f"(expected {self.layout.expected(buffer, height, frame)}, channels "
-                    f"{','.join(self.layout.SLOTS[buffer].channels)})"  # type: ignore[attr-defined]
+                    f"{','.join(self.layout.SLOTS[buffer].channels)})"
                 )
             by_file.setdefault(found[0], []).append((buffer, found[1]))
         out: dict[str, np.ndarray] = {}
