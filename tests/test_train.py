@@ -79,6 +79,7 @@ def test_every_option_of_every_group_composes(group, tmp_path):
         (["data.test_scales=[2,9]"], r"test_scales must lie in \[1, 8\]"),
         (["loss.weights.temporal=0.3"], "needs temporal=recurrent"),
         (["ckpt_path=/no/such.ckpt"], "is not a file"),
+        (["model.optimizer._target_=os.system"], r"model.optimizer._target_=os.system is outside wdss, torch"),
     ],
 )
 def test_invalid_combinations_are_one_clear_sentence(overrides, message, tmp_path):

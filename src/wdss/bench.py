@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m wdss.bench wavelets|data|model``.
+"""Benchmarks: ``python -m wdss.bench wavelets|data|model|stability``.
 
 Every benchmark reports medians of repeated runs and ratios measured in the same process, never absolute
 targets: timing on shared machines is noisy, so comparisons are only made within one run.
@@ -161,6 +161,20 @@ SMALL_WIDTHS = dict(
 )  # fmt: skip
 
 
+def bench_stability() -> Table:
+    """The stiff and extreme cases of :mod:`wdss.stability`: worst relative error and finiteness."""
+    from wdss.stability import run_cases
+
+    table = Table(title="stability: worst relative error against float64 / analytic references")
+    for column in ("group", "case", "worst rel. error", "tolerance", "finite"):
+        table.add_column(column, justify="right" if "error" in column or column == "tolerance" else "left")
+    for case in run_cases():
+        ok = case.finite and case.error <= case.tolerance
+        table.add_row(case.group, case.name, f"{case.error:.2e}", f"{case.tolerance:.0e}",
+                      ("yes" if case.finite else "[red]NO[/red]") + ("" if ok else " [red](fails)[/red]"))
+    return table
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m wdss.bench", description=__doc__)
     sub = parser.add_subparsers(dest="what", required=True)
@@ -180,6 +194,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     model.add_argument("--repeats", type=int, default=3)
     model.add_argument("--widths", choices=("paper", "small"), default="paper")
     model.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    sub.add_parser("stability", help="stiff and extreme cases: worst relative error, finiteness")
     args = parser.parse_args(argv)
 
     console = Console()
@@ -187,6 +202,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         console.print(bench_wavelets(args.shape, args.repeats, args.device, args.bases))
     elif args.what == "data":
         console.print(bench_data(tuple(args.size), args.frames, args.repeats, args.scale))
+    elif args.what == "stability":
+        console.print(bench_stability())
     elif args.what == "model":
         console.print(bench_model(tuple(args.size), args.scale, args.repeats, args.device, args.widths))
 

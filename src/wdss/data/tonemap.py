@@ -18,7 +18,8 @@ def _hable_curve(x: Tensor) -> Tensor:
 
 def hable(x: Tensor, *, exposure: float = 10.0, white: float = 11.2) -> Tensor:
     """Hable's filmic curve of ``exposure * x``, normalised by the curve at ``white``, clamped to [0, 1]."""
-    x = x.clamp_min(0.0)
+    # The curve saturates long before 1e6, and its quadratic terms would overflow near float32's maximum.
+    x = torch.nan_to_num(x, nan=0.0).clamp(0.0, 1e6)
     white_scale = 1.0 / _hable_curve(torch.tensor(white, dtype=x.dtype, device=x.device))
     return (_hable_curve(exposure * x) * white_scale).clamp(0.0, 1.0)
 

@@ -64,6 +64,7 @@ class WDSSLoss(nn.Module):
         longer dominate); the wavelet term always compares linear irradiance coefficients.
         """
         terms: dict[str, Tensor] = {}
+        output, target = output.float(), target.float()  # losses in float32, also under mixed precision
         if self.space == "log":
             output, target = torch.log1p(output.clamp_min(0)), torch.log1p(target.clamp_min(0))
             if temporal is not None:

@@ -257,14 +257,13 @@ class WDSSNet(nn.Module):
         merged = torch.cat([fusion, inr], 1) if self.head == "fusion_ll" else fusion + inr
         coefficients: Tensor | None
         if self.transform == "none":
-            image = self.exit(F.pixel_shuffle(merged, 2))
+            image = self.exit(F.pixel_shuffle(merged, 2)).float()
             coefficients = None
-        elif self.transform == "dwt":
-            coefficients = self.exit(merged)
-            image = self.wavelet(coefficients)  # forward() is the synthesis; a submodule for FLOP counts
         else:
-            coefficients = self.exit(F.pixel_shuffle(merged, 2))
-            image = self.wavelet(coefficients)  # forward() is the synthesis; a submodule for FLOP counts
+            coefficients = self.exit(merged if self.transform == "dwt" else F.pixel_shuffle(merged, 2)).float()
+            # The synthesis stays float32 under mixed precision: it sums large subbands that nearly cancel.
+            with torch.autocast(coefficients.device.type, enabled=False):
+                image = self.wavelet(coefficients)  # forward() is the synthesis; a submodule for FLOP counts
         image = image[..., :height, :width]
         if coefficients is not None and self.transform == "swt":
             coefficients = coefficients[..., :height, :width]
