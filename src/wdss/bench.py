@@ -170,8 +170,13 @@ def bench_stability() -> Table:
         table.add_column(column, justify="right" if "error" in column or column == "tolerance" else "left")
     for case in run_cases():
         ok = case.finite and case.error <= case.tolerance
-        table.add_row(case.group, case.name, f"{case.error:.2e}", f"{case.tolerance:.0e}",
-                      ("yes" if case.finite else "[red]NO[/red]") + ("" if ok else " [red](fails)[/red]"))
+        table.add_row(
+            case.group,
+            case.name,
+            f"{case.error:.2e}",
+            f"{case.tolerance:.0e}",
+            ("yes" if case.finite else "[red]NO[/red]") + ("" if ok else " [red](fails)[/red]"),
+        )
     return table
 
 

@@ -70,13 +70,18 @@ def _wavelet_cases() -> list[Case]:
                 cases.append(Case("wavelets", f"{transform}-{wavelet}, {name}", error, _finite(coeffs, back), 2e-6))
             odd = rng.random((1, 3, 5, 7))
             if transform == "swt":  # PyWavelets refuses odd sizes: the inverse is the reference
-                back = synthesis(analysis(torch.from_numpy(odd).float(), transform="swt", wavelet=wavelet),
-                                 transform="swt", wavelet=wavelet)
+                back = synthesis(
+                    analysis(torch.from_numpy(odd).float(), transform="swt", wavelet=wavelet),
+                    transform="swt",
+                    wavelet=wavelet,
+                )
                 cases.append(Case("wavelets", f"swt-{wavelet}, 5x7 round trip", _rel(back, odd), _finite(back), 2e-6))
             x = rng.random((1, 3, 16, 16)) * 100
             level2 = analysis(torch.from_numpy(x).float(), transform=transform, wavelet=wavelet, level=2)
             back = synthesis(level2, transform=transform, wavelet=wavelet, level=2)
-            error = _rel(back, x) if transform == "dwt" else max(_rel(back, x), _rel(level2, _pywt(x, "swt", wavelet, 2)))
+            error = (
+                _rel(back, x) if transform == "dwt" else max(_rel(back, x), _rel(level2, _pywt(x, "swt", wavelet, 2)))
+            )
             cases.append(Case("wavelets", f"{transform}-{wavelet}, level 2", error, _finite(level2, back), 2e-6))
     return cases
 
@@ -88,8 +93,9 @@ def _brdf_cases() -> list[Case]:
         brdf = safe_brdf(torch.full_like(radiance, value))
         back = remodulate(demodulate(radiance, brdf), brdf)
         ref = radiance.double().numpy()
-        cases.append(Case("brdf", f"{label}, radiance 1e-6..1e5", _rel(back, ref) if value else 0.0,
-                          _finite(back), 1e-6))
+        cases.append(
+            Case("brdf", f"{label}, radiance 1e-6..1e5", _rel(back, ref) if value else 0.0, _finite(back), 1e-6)
+        )
         if value == 0:  # pass-through is exact, not merely close
             cases[-1].error = float((back - radiance).abs().max())
     black = torch.zeros(1, 3, 2, 2)
@@ -108,7 +114,11 @@ def _warp_cases() -> list[Case]:
     motion[:, 0, 6:] = -1e30
     warped = warp_backward(previous, motion)
     outside = float(warped[..., :6, :].abs().max())  # far outside / NaN: zeros
-    g = {"depth": torch.full((1, 1, 8, 8), 1e10), "normal": torch.zeros(1, 3, 8, 8), "base_color": torch.rand(1, 3, 8, 8)}
+    g = {
+        "depth": torch.full((1, 1, 8, 8), 1e10),
+        "normal": torch.zeros(1, 3, 8, 8),
+        "base_color": torch.rand(1, 3, 8, 8),
+    }
     g["normal"][..., :2, :] = float("nan")
     lr = {k: v[..., ::2, ::2] for k, v in g.items()}
     masks = (spatial_mask(g, lr), temporal_mask(g, {**g, "depth": torch.zeros(1, 1, 8, 8)}))
@@ -128,12 +138,27 @@ def _metric_cases() -> list[Case]:
     same = loss(image, image, spatial_mask=torch.ones(1, 1, 16, 16))["total"]
     zero = loss(zeros, zeros, spatial_mask=torch.ones(1, 1, 16, 16))["total"]
     return [
-        Case("metrics", "identical images: PSNR +inf, SSIM 1, loss 0", abs(float(ssim(image, image)) - 1.0),
-             float(psnr(image, image)) == float("inf") and _finite(same), 1e-5),
-        Case("metrics", "all-zero images: loss 0, SSIM 1", float(zero) + abs(float(ssim(zeros, zeros)) - 1.0),
-             _finite(zero, psnr(zeros, image)), 1e-5),
-        Case("metrics", "Hable tone map of 1e5 and 3e38 radiance", abs(float(hable(torch.tensor(1e5))) - 1.0),
-             _finite(hable(torch.tensor([0.0, 1e5, 3e38]))), 0.0),
+        Case(
+            "metrics",
+            "identical images: PSNR +inf, SSIM 1, loss 0",
+            abs(float(ssim(image, image)) - 1.0),
+            float(psnr(image, image)) == float("inf") and _finite(same),
+            1e-5,
+        ),
+        Case(
+            "metrics",
+            "all-zero images: loss 0, SSIM 1",
+            float(zero) + abs(float(ssim(zeros, zeros)) - 1.0),
+            _finite(zero, psnr(zeros, image)),
+            1e-5,
+        ),
+        Case(
+            "metrics",
+            "Hable tone map of 1e5 and 3e38 radiance",
+            abs(float(hable(torch.tensor(1e5))) - 1.0),
+            _finite(hable(torch.tensor([0.0, 1e5, 3e38]))),
+            0.0,
+        ),
     ]
 
 
@@ -142,18 +167,39 @@ def _network_cases() -> list[Case]:
     from wdss.model.network import WDSSNet
 
     torch.manual_seed(0)
-    tiny = dict(lr_widths=(8, 8, 8, 8), gbuffer_width=8, temporal_widths=(8, 4), fusion_widths=(8,), inr_width=8,
-                mlp_width=8, mlp_depth=1, multi_inr_width=4)
+    tiny = dict(
+        lr_widths=(8, 8, 8, 8),
+        gbuffer_width=8,
+        temporal_widths=(8, 4),
+        fusion_widths=(8,),
+        inr_width=8,
+        mlp_width=8,
+        mlp_depth=1,
+        multi_inr_width=4,
+    )
     net = WDSSNet("swt", "db4", **tiny)
     cases = []
     for scale in (1.0, 1.01, 2.37, 4.0, 8.0):
         h, w = 37, 53  # divisible by none of the scales
         lh, lw = lr_size(h, w, scale)
-        out = net(torch.rand(1, 3, lh, lw) * 1e5, torch.rand(1, 11, h, w), torch.zeros(1, 1, h, w),
-                  torch.tensor([scale]), torch.rand(1, 3, h, w) * 1e5, torch.rand(1, 5, h, w))
+        out = net(
+            torch.rand(1, 3, lh, lw) * 1e5,
+            torch.rand(1, 11, h, w),
+            torch.zeros(1, 1, h, w),
+            torch.tensor([scale]),
+            torch.rand(1, 3, h, w) * 1e5,
+            torch.rand(1, 5, h, w),
+        )
         ok = out["irradiance"].shape == (1, 3, h, w)
-        cases.append(Case("scales", f"s = {scale:g}, 37x53 frame, 1e5 radiance", 0.0 if ok else 1.0,
-                          _finite(out["irradiance"]), 0.0))
+        cases.append(
+            Case(
+                "scales",
+                f"s = {scale:g}, 37x53 frame, 1e5 radiance",
+                0.0 if ok else 1.0,
+                _finite(out["irradiance"]),
+                0.0,
+            )
+        )
     return cases
 
 
@@ -161,9 +207,19 @@ def _autocast_cases() -> list[Case]:
     from wdss.model.module import SuperResolutionModule
 
     torch.manual_seed(0)
-    net = {"_target_": "wdss.model.network.WDSSNet", "transform": "swt", "basis": "db4", "lr_widths": [8, 8, 8, 8],
-           "gbuffer_width": 8, "temporal_widths": [8, 4], "fusion_widths": [8], "inr_width": 8, "mlp_width": 8,
-           "mlp_depth": 1, "multi_inr_width": 4}
+    net = {
+        "_target_": "wdss.model.network.WDSSNet",
+        "transform": "swt",
+        "basis": "db4",
+        "lr_widths": [8, 8, 8, 8],
+        "gbuffer_width": 8,
+        "temporal_widths": [8, 4],
+        "fusion_widths": [8],
+        "inr_width": 8,
+        "mlp_width": 8,
+        "mlp_depth": 1,
+        "multi_inr_width": 4,
+    }
     module = SuperResolutionModule(net, {"l1": 1.0, "ssim": 0.4, "wavelet": 0.1}, flip=False)
     h, w = 16, 16
     batch = {
@@ -179,12 +235,24 @@ def _autocast_cases() -> list[Case]:
     float32 = out["irradiance"].dtype == torch.float32 and terms["total"].dtype == torch.float32
     reference = module(batch)["irradiance"].detach()
     error = _rel(out["irradiance"], reference.double().numpy())
-    return [Case("autocast", "bf16 forward + step, 1e5 radiance: synthesis and loss in float32",
-                 error if float32 else 1.0, _finite(out["irradiance"], terms["total"], *grads), 0.1)]
+    return [
+        Case(
+            "autocast",
+            "bf16 forward + step, 1e5 radiance: synthesis and loss in float32",
+            error if float32 else 1.0,
+            _finite(out["irradiance"], terms["total"], *grads),
+            0.1,
+        )
+    ]
 
 
 CASES: tuple[Callable[[], list[Case]], ...] = (
-    _wavelet_cases, _brdf_cases, _warp_cases, _metric_cases, _network_cases, _autocast_cases,
+    _wavelet_cases,
+    _brdf_cases,
+    _warp_cases,
+    _metric_cases,
+    _network_cases,
+    _autocast_cases,
 )
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import atexit
 import os
+import socket
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-__all__ = ["PARENT_FILE", "RUN_ID_FILE", "SweepParentRun", "git_commit", "run_name", "run_tags"]
+__all__ = ["PARENT_FILE", "RUN_ID_FILE", "SweepParentRun", "git_commit", "reap_dead_runs", "run_name", "run_tags"]
 
 PARENT_FILE = "mlflow_parent_run_id"  # in the sweep directory
 RUN_ID_FILE = "mlflow_run_id"  # in a run's output directory: lets ckpt_path=last resume the same run
@@ -90,8 +91,38 @@ def run_tags(cfg: DictConfig) -> dict[str, str]:
             tags[key] = "n/a (baseline)"
     tags["seed"] = str(cfg.get("seed"))
     tags["git_commit"] = git_commit(OmegaConf.select(cfg, "paths.root_dir", default="."))
+    tags["host"], tags["pid"] = socket.gethostname(), str(os.getpid())  # lets reap_dead_runs find killed runs
     tags.update({str(k): str(v) for k, v in (cfg.get("tags") or {}).items()})
     return tags
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def reap_dead_runs(tracking_uri: str, experiment_name: str) -> list[str]:
+    """Mark KILLED the RUNNING runs of this host whose process is gone (SIGKILL leaves no chance to say so)."""
+    from mlflow import MlflowClient
+
+    client = MlflowClient(tracking_uri)
+    experiment = client.get_experiment_by_name(experiment_name)
+    if experiment is None:
+        return []
+    host = socket.gethostname()
+    reaped = []
+    for run in client.search_runs([experiment.experiment_id], filter_string="attributes.status = 'RUNNING'"):
+        tags = run.data.tags
+        if tags.get("host") == host and tags.get("pid", "").isdigit() and not _alive(int(tags["pid"])):
+            client.set_tag(run.info.run_id, "killed", "process ended without closing the run")
+            client.set_terminated(run.info.run_id, "KILLED")
+            reaped.append(run.info.run_id)
+    return reaped
 
 
 class SweepParentRun(Callback):

@@ -9,6 +9,8 @@ same configuration, in the same MLflow run.
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -19,10 +21,11 @@ import lightning as L
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from hydra.utils import instantiate
+from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 
 from wdss.paths import CONF_DIR
-from wdss.tracking import RUN_ID_FILE, run_name, run_tags
+from wdss.tracking import RUN_ID_FILE, reap_dead_runs, run_name, run_tags
 
 __all__ = ["ConfigError", "main", "train", "validate"]
 
@@ -137,7 +140,12 @@ def train(cfg: DictConfig) -> dict[str, float]:
     module = instantiate(cfg.model)
     datamodule = instantiate(cfg.data, inputs=list(module.inputs))
     name = run_name(cfg)
+    uri = OmegaConf.select(cfg, "logger.tracking_uri")
+    if uri:
+        reap_dead_runs(uri, str(cfg.experiment_name))
     logger = instantiate(cfg.logger, run_name=name, tags=run_tags(cfg), run_id=resume_run)
+    if resume_run:  # a resumed run is this process's now
+        logger.experiment.set_tag(resume_run, "pid", str(os.getpid()))
     (output_dir / "run_name").write_text(name)
     (output_dir / RUN_ID_FILE).write_text(logger.run_id)
     callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [_progress_bar()]
@@ -166,6 +174,10 @@ def train(cfg: DictConfig) -> dict[str, float]:
             trainer.test(module, datamodule=datamodule, ckpt_path=best or None, weights_only=True)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")})
         metrics.update(_bench(cfg, module, logger))
+    except SIGTERMException as stop:  # Lightning stops cleanly on SIGTERM, as a SystemExit with status 0
+        logger.finalize("KILLED")
+        print(f"wdss.train: stopped by SIGTERM; resume with ckpt_path=last (checkpoints in {output_dir})")
+        raise SystemExit(128 + signal.SIGTERM) from stop
     except BaseException:
         logger.finalize("FAILED")
         raise

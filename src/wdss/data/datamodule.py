@@ -36,7 +36,7 @@ import lightning as L
 import torch
 from torch.utils.data import DataLoader
 
-from wdss.data.dataset import Collate, FrameDataset, Preprocessing
+from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing
 from wdss.data.layouts import SceneError, Sequence, discover_sequences
 
 __all__ = ["SceneDataModule"]
@@ -146,6 +146,7 @@ class SceneDataModule(L.LightningDataModule):
             first_frame=self.first_frame,
             frame_ranges=ranges,
             sequence_length=self.sequence_length if split == "train" else 1,
+            seed=self.seed,
         )
 
     def setup(self, stage: str | None = None) -> None:
@@ -162,7 +163,7 @@ class SceneDataModule(L.LightningDataModule):
         return DataLoader(
             dataset,
             batch_size=batch_size,
-            shuffle=train,
+            sampler=EpochSampler(len(dataset), self.seed, shuffle=train),
             drop_last=train and len(dataset) >= batch_size,
             num_workers=self.num_workers,
             pin_memory=self.pin_memory,

@@ -19,14 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 from torch import Tensor
-from torch.utils.data import Dataset
+from torch.utils.data import Dataset, Sampler
 
 from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf, split_sum_brdf
 from wdss.data.layouts import BUFFERS, SceneError, Sequence
 from wdss.data.sampling import flip, lr_size, point_sample, scale_matches
 from wdss.data.warp import normalize_normals, spatial_mask, temporal_mask, warp_backward
 
-__all__ = ["BATCH_KEYS", "GBUFFER_STACK", "Collate", "FrameDataset", "Preprocessing", "requirements"]
+__all__ = ["BATCH_KEYS", "GBUFFER_STACK", "Collate", "EpochSampler", "FrameDataset", "Preprocessing", "requirements"]
 
 log = logging.getLogger(__name__)
 
@@ -144,6 +144,7 @@ class FrameDataset(Dataset):
         first_frame: str = "skip",
         frame_ranges: dict[str, tuple[int, int]] | None = None,
         sequence_length: int = 1,
+        seed: int = 0,
     ) -> None:
         if first_frame not in ("skip", "zeros"):
             raise ValueError(f"first_frame must be 'skip' or 'zeros', got {first_frame!r}")
@@ -157,6 +158,7 @@ class FrameDataset(Dataset):
         self.flips = flips
         self.first_frame = first_frame
         self.sequence_length = sequence_length
+        self.seed = seed
         self.need = requirements(self.keys, self.prep)
         history = bool(self.need["prev"])
         self.items: list[tuple[int, int]] = []
@@ -218,13 +220,19 @@ class FrameDataset(Dataset):
                 prev = {b: torch.zeros(BUFFERS[b], *shape) for b in self.need["prev"]}
         return {"hr": hr, "prev": prev, "lr": lr, "sequence": seq.name, "frame": frame, "has_history": has_history}
 
-    def __getitem__(self, index: int) -> dict:
+    def __getitem__(self, index: int | tuple[int, int]) -> dict:
+        # (index, epoch) from EpochSampler: all randomness is a function of (seed, epoch, index), so a run that
+        # is killed and resumed from its last epoch sees exactly the samples an uninterrupted one would.
+        index, epoch = index if isinstance(index, tuple) else (index, None)
+        rng = torch.Generator().manual_seed(_mix(self.seed, epoch, index)) if epoch is not None else None
         seq_index, frame = self.items[index]
         seq = self.sequences[seq_index]
         lr_height = self.native_lr(seq)
         steps = [self._frame(seq, f, lr_height) for f in range(frame - self.sequence_length + 1, frame + 1)]
-        window = self._window(steps[0], lr_height and seq.hr / lr_height)
-        flips = (bool(torch.rand(()) < 0.5), bool(torch.rand(()) < 0.5)) if self.flips else (False, False)
+        window = self._window(steps[0], lr_height and seq.hr / lr_height, rng)
+        flips = (False, False)
+        if self.flips:
+            flips = (bool(torch.rand((), generator=rng) < 0.5), bool(torch.rand((), generator=rng) < 0.5))
         for step in steps:
             self._crop(step, window)
             if any(flips):
@@ -233,9 +241,10 @@ class FrameDataset(Dataset):
                 for role, cam in (("hr", camera), ("lr", camera), ("prev", prev_camera)):
                     step[role] = flip(step[role], horizontal=flips[0], vertical=flips[1], camera=cam)
             del step["has_history"]
+            step["seed"] = _mix(self.seed, epoch, index) if epoch is not None else None
         return steps[0] if self.sequence_length == 1 else {"steps": steps}
 
-    def _window(self, sample: dict, native_scale: float | None) -> tuple | None:
+    def _window(self, sample: dict, native_scale: float | None, rng: torch.Generator | None) -> tuple | None:
         """A random patch position shared by every step of a sample: HR ``(y, x, size)`` and LR likewise."""
         if self.patch is None:
             return None
@@ -248,11 +257,11 @@ class FrameDataset(Dataset):
             step = round(native_scale)
             if size % step:
                 raise SceneError(f"patch size {size} is not a multiple of the native scale {step}")
-            y = int(torch.randint(0, (height - size) // step + 1, ())) * step
-            x = int(torch.randint(0, (width - size) // step + 1, ())) * step
+            y = int(torch.randint(0, (height - size) // step + 1, (), generator=rng)) * step
+            x = int(torch.randint(0, (width - size) // step + 1, (), generator=rng)) * step
             return (y, x, size), (y // step, x // step, size // step)
-        y = int(torch.randint(0, height - size + 1, ()))
-        x = int(torch.randint(0, width - size + 1, ()))
+        y = int(torch.randint(0, height - size + 1, (), generator=rng))
+        x = int(torch.randint(0, width - size + 1, (), generator=rng))
         return (y, x, size), None
 
     @staticmethod
@@ -273,14 +282,17 @@ class Collate:
         self.prep = preprocessing
         self.scale = scale
 
-    def pick_scale(self) -> float:
+    def pick_scale(self, seed: int | None = None) -> float:
+        """The batch's scale: fixed, or drawn from the range (from the first sample's seed when it has one)."""
         if isinstance(self.scale, (tuple, list)):
             low, high = self.scale
-            return float(low + (high - low) * torch.rand(()).item())
+            rng = torch.Generator().manual_seed(seed) if seed is not None else None
+            return float(low + (high - low) * torch.rand((), generator=rng).item())
         return float(self.scale)
 
     def __call__(self, samples: list[dict]) -> dict:
-        scale = self.pick_scale()
+        first = samples[0]["steps"][0] if "steps" in samples[0] else samples[0]
+        scale = self.pick_scale(first.get("seed"))
         if "steps" in samples[0]:  # sequences: one batch per time step, all at the batch's scale
             length = len(samples[0]["steps"])
             return {"steps": [self.batch([s["steps"][t] for s in samples], scale) for t in range(length)]}
@@ -302,6 +314,34 @@ class Collate:
         batch["sequence"] = [s["sequence"] for s in samples]
         batch["frame"] = torch.tensor([s["frame"] for s in samples])
         return batch
+
+
+def _mix(seed: int, epoch: int | None, index: int) -> int:
+    """A per-(seed, epoch, sample) seed for torch.Generator."""
+    return (int(seed) * 1_000_003 + int(epoch or 0) * 7_919 + int(index)) % (2**63 - 1)
+
+
+class EpochSampler(Sampler):
+    """A random order that is a function of (seed, epoch) alone, yielding ``(index, epoch)``.
+
+    Lightning calls :meth:`set_epoch` before each epoch, so resuming from epoch ``k`` replays the order (and,
+    through the dataset's per-sample generators, the crops, flips and scales) of an uninterrupted run.
+    """
+
+    def __init__(self, size: int, seed: int = 0, shuffle: bool = True) -> None:
+        self.size, self.seed, self.shuffle, self.epoch = size, seed, shuffle, 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = epoch
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __iter__(self):
+        order = range(self.size)
+        if self.shuffle:
+            order = torch.randperm(self.size, generator=torch.Generator().manual_seed(_mix(self.seed, self.epoch, 0)))
+        return iter([(int(i), self.epoch) for i in order])
 
 
 def brdf_of(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
