@@ -164,7 +164,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     try:
         start = time.perf_counter()
         if module.trainable and cfg.get("fit", True):
-            trainer.fit(module, datamodule=datamodule, ckpt_path=ckpt_path)
+            trainer.fit(module, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
             experiment.log_metric(run_id, "time/train_s", time.perf_counter() - start)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
             metrics["trainer/global_step"] = float(trainer.global_step)

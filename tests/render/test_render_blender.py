@@ -96,3 +96,42 @@ def test_other_settings_in_an_existing_folder_are_refused(rendered):
     folder, kwargs = rendered
     with pytest.raises(ValueError, match="rendered with other settings"):
         render_sequence(folder.parent, "seq", 7, **{**kwargs, "samples": 3})
+
+
+def test_a_killed_render_resumes_without_redoing_frames(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from wdss.paths import PROJECT_ROOT
+
+    script = (
+        "from wdss.render.sequence import render_sequence\n"
+        f"render_sequence({str(tmp_path)!r}, 'seq', 3, frames=5, resolution=(32, 16), scales=(2,), samples=1, "
+        "denoise=False, objects=(10, 10))\n"
+    )
+    process = subprocess.Popen(
+        [sys.executable, "-c", script], cwd=PROJECT_ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
+    first = tmp_path / "seq" / "8P" / "PretonemapMetallic.0001.exr"  # frame 1 complete (8P is written last)
+    deadline = time.time() + 300
+    while not first.exists():
+        assert process.poll() is None and time.time() < deadline
+        time.sleep(0.01)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    done = {
+        p: p.stat().st_mtime_ns for p in (tmp_path / "seq").rglob("*.exr") if ".0000." in p.name or ".0001." in p.name
+    }
+    assert len(done) == 16  # frames 0 and 1: 4 files at 2 resolutions
+    render_sequence(
+        tmp_path, "seq", 3, frames=5, resolution=(32, 16), scales=(2,), samples=1, denoise=False, objects=(10, 10)
+    )
+    assert all(p.stat().st_mtime_ns == stamp for p, stamp in done.items())  # finished frames were not redone
+    assert not list((tmp_path / "seq").rglob("*.tmp"))
+    seq = Sequence(tmp_path / "seq")
+    assert seq.frames == [0, 1, 2, 3, 4, 5]
+    for frame in seq.frames:  # every file is a complete EXR
+        seq.read(frame, 16, ["color", "depth", "normal", "motion", "roughness"])

@@ -146,6 +146,8 @@ def render_sequence(
         "render_seconds": (previous_meta or {}).get("render_seconds", {}),
     }
     _write_json(sidecar, meta)
+    for stale in folder.rglob(".*.tmp"):  # a render killed while writing leaves only its temporary file
+        stale.unlink()
     todo = [f for f in range(frames + 1) if not all(p.exists() for p in frame_files(folder, f, heights))]
     task = progress.add_task(name, total=frames + 1, completed=frames + 1 - len(todo)) if progress else None
     if not todo:
