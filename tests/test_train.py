@@ -277,3 +277,37 @@ def test_parallel_jobs_against_one_sqlite_file_lose_no_run(tmp_path):
     children = [r for r in runs if "mlflow.parentRunId" in r.data.tags]
     assert len(children) == 4 and all(r.info.status == "FINISHED" for r in children)
     assert all({"test/psnr_2x", "val/psnr", "bench/gflops"} <= set(r.data.metrics) for r in children)
+
+
+def test_evaluating_real_esrgan_without_weights_or_training_is_refused(tmp_path, tracking):
+    cfg = compose_train(["experiment=smoke", "variant=real_esrgan", "fit=false"], tmp_path)
+    with pytest.raises(ConfigError, match="RRDBNet has no weights: set model.net.weights"):
+        train(cfg)
+
+
+@pytest.mark.slow
+def test_the_methods_sweep_runs_every_method_at_smoke_scale(tmp_path):
+    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db", "MLFLOW_DISABLE_TELEMETRY": "true"}
+    command = [
+        sys.executable,
+        "-m",
+        "wdss.train",
+        "-cd",
+        "sweeps",
+        "-cn",
+        "methods",
+        "experiment=smoke",
+        "seed=0",
+        f"paths.log_dir={tmp_path}/outputs",
+    ]
+    done = subprocess.run(command, cwd=PROJECT_ROOT, env=env, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    from mlflow import MlflowClient
+
+    client = MlflowClient(env["MLFLOW_TRACKING_URI"])
+    runs = client.search_runs([client.get_experiment_by_name("methods").experiment_id])
+    jobs = {r.data.tags.get("variant"): r for r in runs if "mlflow.parentRunId" in r.data.tags}
+    assert set(jobs) == {"bicubic", "bilinear_demodulated", "real_esrgan", "dfasr", "none", "swt_db4"}
+    assert all(r.info.status == "FINISHED" and "test/psnr_3x" in r.data.metrics for r in jobs.values())
+    assert jobs["real_esrgan"].data.tags["weights"] == "trained-on-wdss-frames"
+    assert jobs["dfasr"].data.tags["temporal"] == "recurrent"

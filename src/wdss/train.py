@@ -138,12 +138,21 @@ def train(cfg: DictConfig) -> dict[str, float]:
     ckpt_path, resume_run = _resume(cfg)
 
     module = instantiate(cfg.model)
+    fitting = module.trainable and cfg.get("fit", True)
+    if getattr(module.net, "needs_training", False) and not fitting:
+        raise ConfigError(
+            f"{type(module.net).__name__} has no weights: set model.net.weights to the published file, or train it "
+            "on these frames (fit=true); numbers from random weights are never reported"
+        )
     datamodule = instantiate(cfg.data, inputs=list(module.inputs))
     name = run_name(cfg)
     uri = OmegaConf.select(cfg, "logger.tracking_uri")
     if uri:
         reap_dead_runs(uri, str(cfg.experiment_name))
-    logger = instantiate(cfg.logger, run_name=name, tags=run_tags(cfg), run_id=resume_run)
+    tags = run_tags(cfg)
+    if hasattr(module.net, "needs_training"):  # which weights a pretrained-capable baseline reports with
+        tags["weights"] = f"published:{module.net.weights}" if module.net.weights else "trained-on-wdss-frames"
+    logger = instantiate(cfg.logger, run_name=name, tags=tags, run_id=resume_run)
     if resume_run:  # a resumed run is this process's now
         logger.experiment.set_tag(resume_run, "pid", str(os.getpid()))
     (output_dir / "run_name").write_text(name)
@@ -163,14 +172,13 @@ def train(cfg: DictConfig) -> dict[str, float]:
     metrics: dict[str, float] = {}
     try:
         start = time.perf_counter()
-        if module.trainable and cfg.get("fit", True):
+        if fitting:
             trainer.fit(module, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
             experiment.log_metric(run_id, "time/train_s", time.perf_counter() - start)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
             metrics["trainer/global_step"] = float(trainer.global_step)
         if cfg.get("test"):
-            fitted = module.trainable and cfg.get("fit", True)
-            best = getattr(trainer.checkpoint_callback, "best_model_path", "") if fitted else ""
+            best = getattr(trainer.checkpoint_callback, "best_model_path", "") if fitting else ""
             trainer.test(module, datamodule=datamodule, ckpt_path=best or None, weights_only=True)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")})
         metrics.update(_bench(cfg, module, logger))

@@ -60,14 +60,24 @@ class ImageMetrics(nn.Module):
 
     @torch.no_grad()
     def forward(self, output: Tensor, target: Tensor) -> dict[str, Tensor]:
-        out_ldr, ref_ldr = tonemap(output, self.tonemap_name), tonemap(target, self.tonemap_name)
+        values = self._ldr(tonemap(output, self.tonemap_name), tonemap(target, self.tonemap_name))
+        if self.flip:
+            values["flip_hdr"] = flip_error(output, target, "HDR")
+        return {k: v.detach().cpu() for k, v in values.items()}
+
+    @torch.no_grad()
+    def display(self, output_ldr: Tensor, target: Tensor) -> dict[str, Tensor]:
+        """Metrics of a model that outputs display images (no HDR FLIP: it has no linear output)."""
+        values = self._ldr(output_ldr, tonemap(target, self.tonemap_name))
+        return {k: v.detach().cpu() for k, v in values.items()}
+
+    def _ldr(self, out_ldr: Tensor, ref_ldr: Tensor) -> dict[str, Tensor]:
         values = {"psnr": psnr(out_ldr, ref_ldr), "ssim": ssim(out_ldr, ref_ldr)}
         if self.flip:
             values["flip"] = flip_error(out_ldr, ref_ldr, "LDR")
-            values["flip_hdr"] = flip_error(output, target, "HDR")
         if self.lpips is not None:
             values["lpips"] = self.lpips(out_ldr, ref_ldr).flatten().cpu()
-        return {k: v.detach().cpu() for k, v in values.items()}
+        return values
 
 
 # --------------------------------------------------------------------------------------------------------

@@ -7,6 +7,7 @@ scheduler, and stores them as hyper-parameters, so a checkpoint alone rebuilds t
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 from typing import Any
 
@@ -83,6 +84,7 @@ class SuperResolutionModule(L.LightningModule):
         self.optimizer_config = hparams["optimizer"]
         self.scheduler_config = hparams["scheduler"]
         self.trainable = trainable and any(p.requires_grad for p in self.net.parameters())
+        self._forward_args = tuple(inspect.signature(self.net.forward).parameters)
         self.temporal = temporal
         self._check_temporal()
         self._state: tuple[str, int, Tensor] | None = None  # recurrent evaluation: the last output, by frame
@@ -114,11 +116,11 @@ class SuperResolutionModule(L.LightningModule):
         return tuple(sorted(keys))
 
     def forward(self, batch: Mapping[str, Any]) -> dict[str, Tensor | None]:
-        wanted = {k: batch[k] for k in (*self.net.inputs, "scale", "brdf") if k in batch}
-        if not hasattr(self.net, "demodulated"):  # WDSSNet takes no brdf
-            wanted.pop("brdf", None)
+        # Pass the batch tensors the network's forward names (inputs, and scale or brdf where it takes them).
+        wanted = {k: batch[k] for k in self._forward_args if k in batch}
         out = dict(self.net(**wanted))
-        out["color"] = out["irradiance"] * batch["brdf"]
+        # Single-image baselines return a display image (tone-mapped space) instead of irradiance.
+        out["color"] = out["irradiance"] * batch["brdf"] if out.get("irradiance") is not None else None
         return out
 
     # ------------------------------------------------------------------------------------------ steps
@@ -126,6 +128,9 @@ class SuperResolutionModule(L.LightningModule):
     def _loss(
         self, batch: Mapping[str, Any], out: Mapping[str, Tensor | None], temporal: tuple[Tensor, Tensor] | None = None
     ) -> dict[str, Tensor]:
+        if out.get("display") is not None:  # display-space models learn the tone-mapped target
+            target = tonemap(batch["target"], self.hparams.tonemap_name)
+            return self.criterion(out["display"], target, spatial_mask=batch.get("spatial_mask"))
         return self.criterion(
             out["color"],
             batch["target"],
@@ -196,7 +201,10 @@ class SuperResolutionModule(L.LightningModule):
         out = self(batch)
         if self.temporal == "recurrent":
             self._state = (batch["sequence"][0], int(batch["frame"][0]), out["irradiance"].detach())
-        values = self.metrics(out["color"].float(), batch["target"].float())
+        if out.get("display") is not None:
+            values = self.metrics.display(out["display"].float(), batch["target"].float())
+        else:
+            values = self.metrics(out["color"].float(), batch["target"].float())
         n = batch["target"].shape[0]
         for name, per_image in values.items():
             finite = per_image[torch.isfinite(per_image)]
@@ -228,9 +236,12 @@ class SuperResolutionModule(L.LightningModule):
         label = f"{float(batch['scale'][0]):g}x"
         out = self._evaluate(batch, "test", f"_{label}")  # MLflow forbids '@' in metric names
         if batch_idx == 0:  # the first test frame of every scale, for the report's qualitative figure
-            self._log_frame(tonemap(out["color"][:1].float(), self.hparams.tonemap_name), f"test/pred_{label}.png")
+            shown = (
+                out["display"] if out.get("display") is not None else tonemap(out["color"], self.hparams.tonemap_name)
+            )
+            self._log_frame(shown[:1].float(), f"test/pred_{label}.png")
             self._log_frame(tonemap(batch["target"][:1].float(), self.hparams.tonemap_name), f"test/target_{label}.png")
-        return {"color": out["color"].detach()}
+        return {"color": out["color"].detach()} if out.get("color") is not None else {}
 
     def _log_frame(self, image: Tensor, artifact_file: str) -> None:
         experiment, run_id = getattr(self.logger, "experiment", None), getattr(self.logger, "run_id", None)
@@ -272,7 +283,8 @@ def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None],
     import numpy as np
 
     target = tonemap(batch["target"][:1].float(), tonemap_name)
-    pred = tonemap(out["color"][:1].detach().float(), tonemap_name)
+    shown = out.get("display")
+    pred = shown[:1].detach().float() if shown is not None else tonemap(out["color"][:1].detach().float(), tonemap_name)
     lr_source = batch.get("lr_color")
     if lr_source is None and "lr" in batch:
         lr_brdf = torch.nn.functional.interpolate(batch["brdf"][:1], size=batch["lr"].shape[-2:], mode="nearest")

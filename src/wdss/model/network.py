@@ -43,9 +43,9 @@ def _mlp(cin: int, width: int, depth: int, cout: int, final_relu: bool) -> nn.Se
 class LRExtractor(nn.Module):
     """3x3 convolutions with ReLU on the unshuffled LR irradiance; output split fusion / INR amplitude."""
 
-    def __init__(self, widths: Sequence[int]) -> None:
+    def __init__(self, widths: Sequence[int], cin: int = 4 * RGB) -> None:
         super().__init__()
-        chans = [4 * RGB, *widths]
+        chans = [cin, *widths]
         self.body = nn.Sequential(
             *[m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())]
         )
@@ -120,6 +120,7 @@ class FourierINR(nn.Module):
         groups: int = 1,
         group_width: int = 32,
         final_relu: bool = True,
+        phase_bias: bool = True,
     ) -> None:
         super().__init__()
         if width % 2:
@@ -127,7 +128,7 @@ class FourierINR(nn.Module):
         self.pairs = width // 2
         self.amplitude = conv3x3(lr_channels, width)
         self.frequency = conv3x3(gb_channels, 2 * self.pairs)
-        self.phase = nn.Linear(1, self.pairs)
+        self.phase = nn.Linear(1, self.pairs, bias=phase_bias)
         if out_channels % groups:
             raise ValueError(f"INR output {out_channels} does not split into {groups} subbands")
         if groups == 1:
@@ -181,6 +182,10 @@ class WDSSNet(nn.Module):
         final_relu: bool = True,
         input_log: bool = True,
         wavelet: WaveletTransform | None = None,
+        lr_unshuffle: bool = True,
+        gbuffer_channels: Sequence[int] | None = None,
+        fusion_final_relu: bool = False,
+        phase_bias: bool = True,
     ) -> None:
         super().__init__()
         if wavelet is not None:  # a configured transform module (conf/transform/*.yaml) names both
@@ -199,8 +204,14 @@ class WDSSNet(nn.Module):
         # Channels on the HR/2 grid before the head: SWT subbands are full resolution (4 phases each).
         self.coeff_channels = 4 * RGB  # none: RGB x 4 phases; dwt: 4 bands x RGB
         self.half_channels = 4 * 4 * RGB if transform == "swt" else 4 * RGB
-        self.lr = LRExtractor(lr_widths)
-        self.gbuffer = GBufferExtractor(4 * (GBUFFER_CHANNELS + 1), gbuffer_width, gbuffer_block)
+        # DFASR's differences from WDSS are options: an LR branch on the full LR grid (no unshuffle), a subset of
+        # the G-buffer stack (indices into wdss.data.GBUFFER_STACK channels), a ReLU after the fusion output, and
+        # a phase without bias.
+        self.lr_unshuffle = lr_unshuffle
+        self.gbuffer_channels = list(gbuffer_channels) if gbuffer_channels is not None else None
+        n_gbuffer = len(self.gbuffer_channels) if self.gbuffer_channels is not None else GBUFFER_CHANNELS
+        self.lr = LRExtractor(lr_widths, cin=4 * RGB if lr_unshuffle else RGB)
+        self.gbuffer = GBufferExtractor(4 * (n_gbuffer + 1), gbuffer_width, gbuffer_block)
         self.temporal_branch = TemporalExtractor(4 * (RGB + 5), temporal_widths) if temporal else None
         ll = self.half_channels // 4  # LL is the first quarter of band-major channels
         fusion_out = ll if head == "fusion_ll" else self.half_channels
@@ -210,11 +221,13 @@ class WDSSNet(nn.Module):
         layers: list[nn.Module] = [
             m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())
         ]
-        self.fusion = nn.Sequential(*layers, conv3x3(chans[-1], fusion_out))
+        self.fusion = nn.Sequential(
+            *layers, conv3x3(chans[-1], fusion_out), *([nn.ReLU()] if fusion_final_relu else [])
+        )
         groups = 4 if head == "multi_inr" else 1
         self.inr = FourierINR(
             lr_widths[-1] - self.lr.split, gbuffer_width - self.gbuffer.split, inr_width, mlp_width, mlp_depth,
-            inr_out, groups, multi_inr_width, final_relu,
+            inr_out, groups, multi_inr_width, final_relu, phase_bias,
         )  # fmt: skip
         # Exit convolution: on RGB at H (none), on the DWT bands at H/2, on the SWT subbands at H.
         exit_channels = RGB if transform == "none" else self.coeff_channels
@@ -241,7 +254,12 @@ class WDSSNet(nn.Module):
         height, width = gbuffer.shape[-2:]
         pad_hr = (0, width % 2, 0, height % 2)
         pad_lr = (0, lr.shape[-1] % 2, 0, lr.shape[-2] % 2)
-        lr_in = F.pixel_unshuffle(F.pad(self._to_input(lr), pad_lr, mode="replicate"), 2)
+        if self.lr_unshuffle:
+            lr_in = F.pixel_unshuffle(F.pad(self._to_input(lr), pad_lr, mode="replicate"), 2)
+        else:
+            lr_in = self._to_input(lr)
+        if self.gbuffer_channels is not None:
+            gbuffer = gbuffer[:, self.gbuffer_channels]
         gb_in = F.pixel_unshuffle(F.pad(torch.cat([gbuffer, spatial_mask], 1), pad_hr, mode="replicate"), 2)
         lr_fusion, lr_inr = self.lr(lr_in)
         gb_fusion, gb_inr = self.gbuffer(gb_in)

@@ -1,0 +1,110 @@
+"""Real-ESRGAN's generator (RRDBNet: residual-in-residual dense blocks), a single-image baseline.
+
+It sees only the tone-mapped low-resolution colour, as a general image super-resolution method would, and
+returns a display image. Published weights (scales 2 and 4) load from a local file (``weights``); other scales
+run the network's native scale and resize to the frame. Without weights it must be trained on our frames
+(then tagged so in MLflow); :attr:`needs_training` lets the entry points refuse to evaluate random weights.
+"""
+
+from __future__ import annotations
+
+import os
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from wdss.data.tonemap import tonemap
+
+__all__ = ["RRDBNet"]
+
+
+class ResidualDenseBlock(nn.Module):
+    def __init__(self, features: int, growth: int) -> None:
+        super().__init__()
+        self.conv1 = nn.Conv2d(features, growth, 3, 1, 1)
+        self.conv2 = nn.Conv2d(features + growth, growth, 3, 1, 1)
+        self.conv3 = nn.Conv2d(features + 2 * growth, growth, 3, 1, 1)
+        self.conv4 = nn.Conv2d(features + 3 * growth, growth, 3, 1, 1)
+        self.conv5 = nn.Conv2d(features + 4 * growth, features, 3, 1, 1)
+
+    def forward(self, x: Tensor) -> Tensor:
+        x1 = F.leaky_relu(self.conv1(x), 0.2)
+        x2 = F.leaky_relu(self.conv2(torch.cat((x, x1), 1)), 0.2)
+        x3 = F.leaky_relu(self.conv3(torch.cat((x, x1, x2), 1)), 0.2)
+        x4 = F.leaky_relu(self.conv4(torch.cat((x, x1, x2, x3), 1)), 0.2)
+        return x + 0.2 * self.conv5(torch.cat((x, x1, x2, x3, x4), 1))
+
+
+class RRDB(nn.Module):
+    def __init__(self, features: int, growth: int) -> None:
+        super().__init__()
+        self.rdb1 = ResidualDenseBlock(features, growth)
+        self.rdb2 = ResidualDenseBlock(features, growth)
+        self.rdb3 = ResidualDenseBlock(features, growth)
+
+    def forward(self, x: Tensor) -> Tensor:
+        return x + 0.2 * self.rdb3(self.rdb2(self.rdb1(x)))
+
+
+class RRDBNet(nn.Module):
+    """RRDBNet x4 (two nearest-upsample + conv stages); x2 by pixel-unshuffling the input first.
+
+    Defaults are Real-ESRGAN's (23 blocks, 64 features, growth 32: ~16.7 M parameters). ``weights``: a local
+    ``.pth`` of the published generator (``params_ema`` or ``params`` or a bare state dict).
+    """
+
+    transform = "none"
+
+    def __init__(
+        self,
+        scale: int = 4,
+        num_feat: int = 64,
+        num_block: int = 23,
+        num_grow_ch: int = 32,
+        weights: str | None = None,
+        tonemap_name: str = "hable",
+    ) -> None:
+        super().__init__()
+        if scale not in (2, 4):
+            raise ValueError(f"RRDBNet's native scale is 2 or 4 (others by resizing), got {scale}")
+        self.scale, self.tonemap_name = scale, tonemap_name
+        cin = 3 * (4 if scale == 2 else 1)
+        self.conv_first = nn.Conv2d(cin, num_feat, 3, 1, 1)
+        self.body = nn.Sequential(*[RRDB(num_feat, num_grow_ch) for _ in range(num_block)])
+        self.conv_body = nn.Conv2d(num_feat, num_feat, 3, 1, 1)
+        self.conv_up1 = nn.Conv2d(num_feat, num_feat, 3, 1, 1)
+        self.conv_up2 = nn.Conv2d(num_feat, num_feat, 3, 1, 1)
+        self.conv_hr = nn.Conv2d(num_feat, num_feat, 3, 1, 1)
+        self.conv_last = nn.Conv2d(num_feat, 3, 3, 1, 1)
+        self.weights = weights
+        if weights:
+            if not os.path.isfile(weights):
+                raise FileNotFoundError(f"model.net.weights={weights} is not a file (Real-ESRGAN's published .pth)")
+            state = torch.load(weights, map_location="cpu", weights_only=True)
+            state = state.get("params_ema", state.get("params", state))
+            self.load_state_dict(state)
+
+    @property
+    def needs_training(self) -> bool:
+        return not self.weights
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return ("lr_color", "brdf")
+
+    def forward(self, lr_color: Tensor, brdf: Tensor, **_: Tensor) -> dict:
+        height, width = brdf.shape[-2:]
+        lh, lw = lr_color.shape[-2:]
+        x = tonemap(lr_color, self.tonemap_name)
+        if self.scale == 2:  # x2 = the x4 body on the pixel-unshuffled input (padded to even sizes)
+            x = F.pixel_unshuffle(F.pad(x, (0, lw % 2, 0, lh % 2), mode="replicate"), 2)
+        feat = self.conv_first(x)
+        feat = feat + self.conv_body(self.body(feat))
+        feat = F.leaky_relu(self.conv_up1(F.interpolate(feat, scale_factor=2, mode="nearest")), 0.2)
+        feat = F.leaky_relu(self.conv_up2(F.interpolate(feat, scale_factor=2, mode="nearest")), 0.2)
+        out = self.conv_last(F.leaky_relu(self.conv_hr(feat), 0.2))[..., : lh * self.scale, : lw * self.scale]
+        if out.shape[-2:] != (height, width):  # other scales: the native result resized to the frame
+            out = F.interpolate(out, size=(height, width), mode="bicubic", align_corners=False, antialias=True)
+        # Clamped for evaluation only: a clamp in training would zero the gradient of out-of-range pixels.
+        return {"display": out if self.training else out.clamp(0.0, 1.0), "irradiance": None, "coefficients": None}

@@ -1,0 +1,94 @@
+"""Comparison models: DFASR and Real-ESRGAN's RRDBNet through the same module, data and tracking."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from tests.model.helpers import batch
+from wdss.model.module import SuperResolutionModule
+from wdss.model.rrdbnet import RRDBNet
+
+DFASR = {
+    "_target_": "wdss.model.network.WDSSNet", "transform": "none", "lr_unshuffle": False,
+    "gbuffer_channels": [3, 4, 5, 6, 0, 1, 2], "fusion_final_relu": True, "phase_bias": False, "final_relu": False,
+}  # fmt: skip
+TINY_DFASR = {
+    **DFASR,
+    "lr_widths": [8, 8, 8, 8],
+    "gbuffer_width": 8,
+    "temporal_widths": [8, 4],
+    "fusion_widths": [8],
+    "inr_width": 8,
+    "mlp_width": 8,
+    "mlp_depth": 1,
+}
+TINY_RRDB = {"_target_": "wdss.model.rrdbnet.RRDBNet", "num_feat": 8, "num_block": 1, "num_grow_ch": 4}
+
+
+def test_dfasr_has_its_published_size_and_inputs():
+    module = SuperResolutionModule(DFASR, flip=False, temporal="recurrent")
+    assert 0.52e6 < sum(p.numel() for p in module.net.parameters()) < 0.54e6  # ~0.53 M
+    assert module.net.gbuffer.body[0].in_channels == 32  # 8 G-buffer channels, unshuffled
+    assert module.net.lr.body[0].in_channels == 3  # the LR branch sees the full LR grid
+    assert "motion" in module.inputs and "history" not in module.inputs  # its own warped output is the history
+
+
+@pytest.mark.parametrize("scale, size", [(2.0, (16, 20)), (3.0, (18, 27)), (2.37, (19, 23))])
+def test_dfasr_shapes_at_any_scale(scale, size):
+    module = SuperResolutionModule(TINY_DFASR, flip=False)
+    out = module(batch(size=size, scale=scale))
+    assert out["color"].shape == (2, 3, *size) and torch.isfinite(out["color"]).all()
+
+
+def test_real_esrgan_has_its_published_size():
+    assert 16.6e6 < sum(p.numel() for p in RRDBNet().parameters()) < 16.8e6  # ~16.7 M
+
+
+@pytest.mark.parametrize(
+    "native, scale, size", [(4, 4.0, (24, 32)), (2, 2.0, (16, 20)), (4, 3.0, (18, 27)), (2, 2.5, (15, 25))]
+)
+def test_real_esrgan_shapes_native_and_resized(native, scale, size):
+    module = SuperResolutionModule({**TINY_RRDB, "scale": native}, flip=False).eval()
+    out = module(batch(size=size, scale=scale))
+    assert out["display"].shape == (2, 3, *size) and out["color"] is None
+    assert float(out["display"].min()) >= 0 and float(out["display"].max()) <= 1
+    values = module.metrics.display(out["display"], batch(size=size, scale=scale)["target"])
+    assert set(values) == {"psnr", "ssim"}
+
+
+@pytest.mark.parametrize("net, temporal", [(TINY_DFASR, "gt_history"), (TINY_RRDB, None)], ids=["dfasr", "rrdbnet"])
+def test_one_step_lowers_the_loss(net, temporal):
+    torch.manual_seed(0)
+    module = SuperResolutionModule(
+        net,
+        {"l1": 1.0, "ssim": 0.4},
+        flip=False,
+        temporal=temporal,
+        optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": 1e-3},
+    )
+    data = batch(size=(16, 16))
+    optimizer = module.configure_optimizers()
+    losses = []
+    for _ in range(2):
+        terms = module._loss(data, module(data))
+        losses.append(float(terms["total"].detach()))
+        optimizer.zero_grad()
+        terms["total"].backward()
+        optimizer.step()
+    assert losses[1] < losses[0]
+
+
+def test_real_esrgan_loads_published_weight_layouts(tmp_path):
+    reference = RRDBNet(num_feat=8, num_block=1, num_grow_ch=4)
+    torch.save({"params_ema": reference.state_dict()}, tmp_path / "RealESRGAN_tiny.pth")
+    loaded = RRDBNet(num_feat=8, num_block=1, num_grow_ch=4, weights=str(tmp_path / "RealESRGAN_tiny.pth"))
+    assert not loaded.needs_training and reference.needs_training
+    data = batch()
+    loaded.eval()
+    reference.eval()
+    torch.testing.assert_close(
+        loaded(data["lr_color"], data["brdf"])["display"], reference(data["lr_color"], data["brdf"])["display"]
+    )
+    with pytest.raises(FileNotFoundError, match="is not a file"):
+        RRDBNet(weights="/nowhere/RealESRGAN_x4plus.pth")
