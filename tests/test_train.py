@@ -307,7 +307,7 @@ def test_the_methods_sweep_runs_every_method_at_smoke_scale(tmp_path):
     client = MlflowClient(env["MLFLOW_TRACKING_URI"])
     runs = client.search_runs([client.get_experiment_by_name("methods").experiment_id])
     jobs = {r.data.tags.get("variant"): r for r in runs if "mlflow.parentRunId" in r.data.tags}
-    assert set(jobs) == {"bicubic", "bilinear_demodulated", "real_esrgan", "dfasr", "none", "swt_db4"}
+    assert set(jobs) == {"bicubic", "bilinear_demodulated", "real_esrgan", "nsrr", "fusesr", "dfasr", "none", "swt_db4"}
     assert all(r.info.status == "FINISHED" and "test/psnr_3x" in r.data.metrics for r in jobs.values())
     assert jobs["real_esrgan"].data.tags["weights"] == "trained-on-wdss-frames"
     assert jobs["dfasr"].data.tags["temporal"] == "recurrent"

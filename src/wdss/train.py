@@ -200,7 +200,8 @@ def _bench(cfg: DictConfig, module: Any, logger: Any) -> dict[str, float]:
     if not bench:
         return {}
     net = module.net.eval()
-    inputs = dummy_inputs(net, int(bench.height), int(bench.width), float(bench.scale), str(module.device))
+    scale = float(net.scale) if getattr(net, "fixed_scale", False) else float(bench.scale)
+    inputs = dummy_inputs(net, int(bench.height), int(bench.width), scale, str(module.device))
     total, _ = flops(net, inputs)
     values = {
         "bench/ms_per_frame": forward_ms(net, inputs, repeats=int(bench.repeats)),

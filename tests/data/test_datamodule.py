@@ -8,7 +8,16 @@ from pathlib import Path
 import pytest
 import torch
 
-from wdss.data import BATCH_KEYS, FrameDataset, Preprocessing, SceneDataModule, SceneError, Sequence, point_sample
+from wdss.data import (
+    BATCH_KEYS,
+    Collate,
+    FrameDataset,
+    Preprocessing,
+    SceneDataModule,
+    SceneError,
+    Sequence,
+    point_sample,
+)
 from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf
 from wdss.data.layouts import Source
 from wdss.data.synthetic import write_sequence
@@ -269,3 +278,29 @@ def test_sequences_share_one_patch_and_scale_across_steps(root):
         warped = warp_backward(previous["target"], current["motion"])
         inside = warped.abs().sum(1) > 1e-3
         torch.testing.assert_close(warped[:, :, inside[0]], current["target"][:, :, inside[0]], rtol=1e-5, atol=1e-5)
+
+
+def test_rendering_methods_read_only_their_history(root, opened):
+    """NSRR reads the previous frame at low resolution only; FuseSR two previous frames at high resolution."""
+    nsrr = FrameDataset(
+        [Sequence(root / "seq_a")],
+        ["lr_color", "lr_gbuffer", "prev_lr_color", "prev_lr_gbuffer", "motion", "brdf", "target"],
+        scale=3.0,
+    )
+    sample = nsrr[0]  # frame 2: its previous frame from the native 8P folder
+    previous = [n for n in opened if ".0001." in n]
+    assert previous and all(n.startswith("8P/") for n in previous)
+    assert sample["prev_lr"]["color"].shape == (3, 8, 12)
+    opened.clear()
+    fusesr = FrameDataset(
+        [Sequence(root / "seq_a")], ["lr", "lr_gbuffer", "gbuffer", "history", "history2", "brdf", "target"], scale=3.0
+    )
+    assert [frame for _, frame in fusesr.items] == [3, 4]  # two previous frames needed
+    fusesr[0]
+    assert {int(n.split(".")[-2]) for n in opened} == {1, 2, 3}
+    batch = Collate(fusesr.keys, fusesr.prep, 3.0)([fusesr[0], fusesr[1]])
+    assert batch["history2"].shape == (2, 3, 24, 36) and batch["lr_gbuffer"].shape == (2, 4, 8, 12)
+    # The synthetic content moves by the motion vectors: frame t-2 warped twice is frame t where it was seen.
+    current = batch["target"] / batch["brdf"]
+    inside = batch["history2"].abs().sum(1) > 1e-3
+    torch.testing.assert_close(batch["history2"][:, :, inside[0]][0], current[0][:, inside[0]], rtol=1e-5, atol=1e-5)

@@ -92,3 +92,55 @@ def test_real_esrgan_loads_published_weight_layouts(tmp_path):
     )
     with pytest.raises(FileNotFoundError, match="is not a file"):
         RRDBNet(weights="/nowhere/RealESRGAN_x4plus.pth")
+
+
+def rendering_batch(scale: float, size: tuple[int, int]) -> dict:
+    data = batch(size=size, scale=scale)
+    n, (h, w) = 2, data["lr"].shape[-2:]
+    data.update(
+        lr_gbuffer=torch.rand(n, 4, h, w),
+        prev_lr_color=torch.rand(n, 3, h, w),
+        prev_lr_gbuffer=torch.rand(n, 4, h, w),
+        motion=torch.zeros(n, 2, *size),
+        history2=torch.rand(n, 3, *size),
+    )
+    return data
+
+
+TINY_NSRR = {"_target_": "wdss.model.nsrr.NSRR", "widths": [8, 4], "unet": [8, 16], "reweight_width": 8}
+TINY_FUSESR = {"_target_": "wdss.model.fusesr.FuseSR", "scale": 3, "width": 8, "blocks": 1}
+
+
+@pytest.mark.parametrize("scale, size", [(2.0, (16, 20)), (3.0, (18, 27)), (2.37, (19, 23))])
+def test_nsrr_shapes_at_any_scale(scale, size):
+    out = SuperResolutionModule(TINY_NSRR, flip=False)(rendering_batch(scale, size))
+    assert out["color"].shape == (2, 3, *size) and torch.isfinite(out["color"]).all()
+
+
+def test_fusesr_is_a_fixed_integer_scale_method():
+    module = SuperResolutionModule(TINY_FUSESR, flip=False)
+    assert module(rendering_batch(3.0, (18, 27)))["color"].shape == (2, 3, 18, 27)
+    with pytest.raises(ValueError, match="this FuseSR upsamples by 3"):
+        module(rendering_batch(2.0, (16, 20)))
+    from hydra.errors import InstantiationException
+
+    with pytest.raises(InstantiationException, match="FuseSR needs an integer scale >= 2"):
+        SuperResolutionModule({**TINY_FUSESR, "scale": 2.5}, flip=False)
+
+
+@pytest.mark.parametrize("net, scale", [(TINY_NSRR, 2.0), (TINY_FUSESR, 3.0)], ids=["nsrr", "fusesr"])
+def test_rendering_methods_learn(net, scale):
+    torch.manual_seed(0)
+    module = SuperResolutionModule(
+        net, {"l1": 1.0}, flip=False, optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": 1e-3}
+    )
+    data = rendering_batch(scale, (18, 18) if scale == 3.0 else (16, 16))
+    optimizer = module.configure_optimizers()
+    losses = []
+    for _ in range(2):
+        terms = module._loss(data, module(data))
+        losses.append(float(terms["total"].detach()))
+        optimizer.zero_grad()
+        terms["total"].backward()
+        optimizer.step()
+    assert losses[1] < losses[0]

@@ -17,6 +17,10 @@ key                shape                        meaning
 ``history``        (N, 3, H, W)                 previous HR frame (irradiance), warped by the motion vectors
 ``temporal_mask``  (N, 5, H, W)                 |d depth|, |d albedo| (3), (1 - n.n')/2 against the warped previous
 ``motion``         (N, 2, H, W)                 motion vectors, HR pixels, current - previous, y up
+``lr_gbuffer``     (N, 4, h, w)                 low-resolution depth and normal (NSRR, FuseSR)
+``prev_lr_color``  (N, 3, h, w)                 the previous frame's low-resolution colour (NSRR)
+``prev_lr_gbuffer`` (N, 4, h, w)                the previous frame's low-resolution depth and normal (NSRR)
+``history2``       (N, 3, H, W)                 frame t-2 (irradiance) warped to t through t-1 (FuseSR)
 ``scale``          (N,)                         the nominal scale s of the batch (h = round(H / s))
 ``sequence``       list[str], ``frame`` (N,)    where each sample comes from
 =================  ===========================  ================================================================

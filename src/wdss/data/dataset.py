@@ -43,8 +43,14 @@ BATCH_KEYS = (
     "history",
     "temporal_mask",
     "motion",
+    "lr_gbuffer",
+    "prev_lr_color",
+    "prev_lr_gbuffer",
+    "history2",
 )
 _MASK_BUFFERS = {"depth", "normal", "base_color"}
+ROLES = ("hr", "lr", "prev", "prev_lr", "prev2")
+_OFFSET = {"hr": 0, "lr": 0, "prev": 1, "prev_lr": 1, "prev2": 2}  # frames back from the sample's frame
 
 
 @dataclass
@@ -70,12 +76,13 @@ class Preprocessing:
 
 
 def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]]:
-    """Buffers per role (``hr``: current frame, ``prev``: previous frame, ``lr``: low resolution) for ``keys``."""
+    """Buffers per role for ``keys``: ``hr`` (current frame), ``lr`` (current, low resolution), ``prev`` (previous
+    frame), ``prev_lr`` (previous, low resolution), ``prev2`` (the frame before the previous one)."""
     keys = set(keys)
     unknown = keys - set(BATCH_KEYS) - {"scale"}
     if unknown:
         raise ValueError(f"unknown batch keys {sorted(unknown)}: expected some of {', '.join(BATCH_KEYS)}")
-    need: dict[str, set[str]] = {"hr": set(), "prev": set(), "lr": set()}
+    need: dict[str, set[str]] = {role: set() for role in ROLES}
     brdf = prep.brdf_buffers
     if "target" in keys:
         need["hr"] |= {"color"}
@@ -99,6 +106,16 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
         need["hr"] |= _MASK_BUFFERS | {"motion"}
         need["prev"] |= _MASK_BUFFERS
     if "motion" in keys:
+        need["hr"] |= {"motion"}
+    if "lr_gbuffer" in keys:
+        need["lr"] |= {"depth", "normal"}
+    if "prev_lr_color" in keys:
+        need["prev_lr"] |= {"color"}
+    if "prev_lr_gbuffer" in keys:
+        need["prev_lr"] |= {"depth", "normal"}
+    if "history2" in keys:
+        need["prev2"] |= {"color"} | (brdf if prep.demodulate else set())
+        need["prev"] |= {"motion"}
         need["hr"] |= {"motion"}
     return need
 
@@ -160,7 +177,7 @@ class FrameDataset(Dataset):
         self.sequence_length = sequence_length
         self.seed = seed
         self.need = requirements(self.keys, self.prep)
-        history = bool(self.need["prev"])
+        back = max((_OFFSET[role] for role, buffers in self.need.items() if buffers), default=0)
         self.items: list[tuple[int, int]] = []
         for index, seq in enumerate(self.sequences):
             frames = seq.frames
@@ -172,7 +189,7 @@ class FrameDataset(Dataset):
                 first = frame - sequence_length + 1
                 if any(f not in available for f in range(first, frame + 1)):
                     continue
-                if history and first_frame == "skip" and first - 1 not in available:
+                if first_frame == "skip" and any(first - k not in available for k in range(1, back + 1)):
                     continue
                 self.items.append((index, frame))
         if not self.items:
@@ -198,27 +215,42 @@ class FrameDataset(Dataset):
         return _clean(seq.read(frame, height, sorted(buffers), sanitize=self.prep.sanitize), self.prep)
 
     def _frame(self, seq: Sequence, frame: int, lr_height: int | None) -> dict:
-        """The uncropped buffers of one frame in each role."""
-        hr_need = set(self.need["hr"]) | (set() if lr_height else self.need["lr"])
-        hr = self._read(seq, frame, seq.hr, hr_need) if hr_need else {}
-        lr = self._read(seq, frame, lr_height, self.need["lr"]) if lr_height else {}
-        if lr and hr:
-            hr_shape, lr_shape = next(iter(hr.values())).shape[-2:], next(iter(lr.values())).shape[-2:]
+        """The uncropped buffers of one frame in each role (zeros for history before the first frame)."""
+        need = self.need
+        # Without a native low-resolution folder, LR roles are point-sampled from their HR frame in Collate.
+        reads = {
+            "hr": (frame, seq.hr, need["hr"] | (set() if lr_height else need["lr"])),
+            "lr": (frame, lr_height, need["lr"] if lr_height else set()),
+            "prev": (frame - 1, seq.hr, need["prev"] | (set() if lr_height else need["prev_lr"])),
+            "prev_lr": (frame - 1, lr_height, need["prev_lr"] if lr_height else set()),
+            "prev2": (frame - 2, seq.hr, need["prev2"]),
+        }
+        available = set(seq.frames)
+        out: dict = {"sequence": seq.name, "frame": frame, "has_history": frame - 1 in available}
+        shapes: dict[int | None, tuple[int, int]] = {}
+        for role, (number, height, buffers) in reads.items():
+            if not buffers:
+                out[role] = {}
+            elif number in available:
+                out[role] = self._read(seq, number, height, buffers)
+                shapes.setdefault(height, next(iter(out[role].values())).shape[-2:])
+            else:  # history before the first frame, kept with zeros (first_frame="zeros")
+                shape = shapes.get(height) or self._shape(seq, height)
+                out[role] = {b: torch.zeros(BUFFERS[b], *shape) for b in buffers}
+        if lr_height and seq.hr in shapes and lr_height in shapes:
+            hr_shape, lr_shape = shapes[seq.hr], shapes[lr_height]
             expected = lr_size(*hr_shape, float(self.scale))
             if tuple(lr_shape) != expected:
                 raise SceneError(
                     f"sequence {seq.name!r}, frame {frame}: the {lr_height}P frame is {lr_shape[1]}x{lr_shape[0]}, "
                     f"but {hr_shape[1]}x{hr_shape[0]} at scale {self.scale} needs {expected[1]}x{expected[0]}"
                 )
-        prev: dict[str, Tensor] = {}
-        has_history = frame - 1 in set(seq.frames)
-        if self.need["prev"]:
-            if has_history:
-                prev = self._read(seq, frame - 1, seq.hr, self.need["prev"])
-            else:  # first frame, kept with zero history
-                shape = next(iter(hr.values())).shape[-2:]
-                prev = {b: torch.zeros(BUFFERS[b], *shape) for b in self.need["prev"]}
-        return {"hr": hr, "prev": prev, "lr": lr, "sequence": seq.name, "frame": frame, "has_history": has_history}
+        return out
+
+    def _shape(self, seq: Sequence, height: int) -> tuple[int, int]:
+        """The frame size at ``height`` (from one plane of the first frame), for zero history."""
+        plane = seq.read(seq.frames[0], height, ["color"] if seq.has("color", height) else ["depth"])
+        return next(iter(plane.values())).shape[-2:]
 
     def __getitem__(self, index: int | tuple[int, int]) -> dict:
         # (index, epoch) from EpochSampler: all randomness is a function of (seed, epoch, index), so a run that
@@ -236,10 +268,10 @@ class FrameDataset(Dataset):
         for step in steps:
             self._crop(step, window)
             if any(flips):
-                camera = seq.camera(step["frame"])
-                prev_camera = seq.camera(step["frame"] - 1) if step["has_history"] else camera
-                for role, cam in (("hr", camera), ("lr", camera), ("prev", prev_camera)):
-                    step[role] = flip(step[role], horizontal=flips[0], vertical=flips[1], camera=cam)
+                for role in ROLES:
+                    camera = seq.camera(step["frame"] - _OFFSET[role])
+                    camera = seq.camera(step["frame"]) if camera is None else camera
+                    step[role] = flip(step[role], horizontal=flips[0], vertical=flips[1], camera=camera)
             del step["has_history"]
             step["seed"] = _mix(self.seed, epoch, index) if epoch is not None else None
         return steps[0] if self.sequence_length == 1 else {"steps": steps}
@@ -268,7 +300,13 @@ class FrameDataset(Dataset):
     def _crop(sample: dict, window: tuple | None) -> None:
         if window is None:
             return
-        for role, box in (("hr", window[0]), ("prev", window[0]), ("lr", window[1])):
+        for role, box in (
+            ("hr", window[0]),
+            ("prev", window[0]),
+            ("prev2", window[0]),
+            ("lr", window[1]),
+            ("prev_lr", window[1]),
+        ):
             if box is not None:
                 y, x, size = box
                 sample[role] = {k: v[..., y : y + size, x : x + size] for k, v in sample[role].items()}
@@ -303,13 +341,14 @@ class Collate:
             names = samples[0][role].keys()
             return {name: torch.stack([s[role][name] for s in samples]) for name in names}
 
-        hr, prev, lr = stack("hr"), stack("prev"), stack("lr")
-        need_lr = requirements(self.keys - {"scale"}, self.prep)["lr"]
-        if need_lr and not lr:
-            height, width = next(iter(hr.values())).shape[-2:]
-            size = lr_size(height, width, scale)
-            lr = {name: point_sample(hr[name], size) for name in need_lr}
-        batch = build_batch(self.keys, hr, prev, lr, self.prep)
+        roles = {role: stack(role) for role in ROLES}
+        need = requirements(self.keys - {"scale"}, self.prep)
+        height, width = next(iter(roles["hr"].values())).shape[-2:] if roles["hr"] else (0, 0)
+        for low, high in (("lr", "hr"), ("prev_lr", "prev")):  # no native folder: point-sample the HR frame
+            if need[low] and not roles[low]:
+                size = lr_size(height, width, scale)
+                roles[low] = {name: point_sample(roles[high][name], size) for name in need[low]}
+        batch = build_batch(self.keys, roles, self.prep)
         batch["scale"] = torch.full((len(samples),), scale)
         batch["sequence"] = [s["sequence"] for s in samples]
         batch["frame"] = torch.tensor([s["frame"] for s in samples])
@@ -355,10 +394,9 @@ def brdf_of(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
     return safe_brdf(raw)
 
 
-def build_batch(
-    keys: set[str], hr: dict[str, Tensor], prev: dict[str, Tensor], lr: dict[str, Tensor], prep: Preprocessing
-) -> dict[str, Tensor]:
+def build_batch(keys: set[str], roles: dict[str, dict[str, Tensor]], prep: Preprocessing) -> dict[str, Tensor]:
     """The named batch tensors from stacked ``(N, C, H, W)`` buffers of each role."""
+    hr, lr, prev, prev_lr = roles["hr"], roles["lr"], roles["prev"], roles["prev_lr"]
     batch: dict[str, Tensor] = {}
     if "target" in keys:
         batch["target"] = hr["color"]
@@ -391,4 +429,14 @@ def build_batch(
             batch["temporal_mask"] = temporal_mask(hr, warped)
     if "motion" in keys:
         batch["motion"] = hr["motion"]
+    if "lr_gbuffer" in keys:
+        batch["lr_gbuffer"] = torch.cat([lr["depth"], lr["normal"]], dim=1)
+    if "prev_lr_color" in keys:
+        batch["prev_lr_color"] = prev_lr["color"]
+    if "prev_lr_gbuffer" in keys:
+        batch["prev_lr_gbuffer"] = torch.cat([prev_lr["depth"], prev_lr["normal"]], dim=1)
+    if "history2" in keys:  # frame t-2 warped to t-1, then to t
+        prev2 = roles["prev2"]
+        older = demodulate(prev2["color"], brdf_of(prev2, prep)) if prep.demodulate else prev2["color"]
+        batch["history2"] = warp_backward(warp_backward(older, prev["motion"]), hr["motion"])
     return batch

@@ -6,6 +6,7 @@ after on a GPU) and counts FLOPs, which do not depend on the machine.
 
 from __future__ import annotations
 
+import inspect
 import statistics
 import time
 
@@ -19,17 +20,20 @@ __all__ = ["dummy_inputs", "flops", "forward_ms"]
 
 
 def dummy_inputs(net: nn.Module, height: int, width: int, scale: float, device: str = "cpu") -> dict:
-    """Random inputs of the right shapes for ``net.inputs`` at an ``height x width`` output and ``scale``."""
+    """Random inputs for every argument of ``net.forward`` at an ``height x width`` output and ``scale``."""
     h, w = lr_size(height, width, scale)
     shapes = {
-        "lr": (3, h, w), "lr_color": (3, h, w), "gbuffer": (11, height, width), "spatial_mask": (1, height, width),
-        "history": (3, height, width), "temporal_mask": (5, height, width), "brdf": (3, height, width),
+        "lr": (3, h, w), "lr_color": (3, h, w), "lr_gbuffer": (4, h, w), "prev_lr_color": (3, h, w),
+        "prev_lr_gbuffer": (4, h, w), "gbuffer": (11, height, width), "spatial_mask": (1, height, width),
+        "history": (3, height, width), "history2": (3, height, width), "temporal_mask": (5, height, width),
+        "brdf": (3, height, width), "motion": (2, height, width),
     }  # fmt: skip
-    inputs = {k: torch.rand(1, *shapes[k], device=device) for k in net.inputs}
-    if "scale" in net.forward.__code__.co_varnames:
-        inputs["scale"] = torch.full((1,), float(scale), device=device)
-    if "brdf" in net.forward.__code__.co_varnames:
-        inputs["brdf"] = torch.rand(1, *shapes["brdf"], device=device)
+    inputs = {}
+    for name in inspect.signature(net.forward).parameters:
+        if name == "scale":
+            inputs["scale"] = torch.full((1,), float(scale), device=device)
+        elif name in shapes:
+            inputs[name] = torch.rand(1, *shapes[name], device=device)
     return inputs
 
 
