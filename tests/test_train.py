@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.hydra_config import HydraConfig
+from hydra.utils import instantiate
 from omegaconf import OmegaConf, open_dict
 
 from wdss.paths import CONF_DIR, PROJECT_ROOT
@@ -110,7 +111,8 @@ def test_every_sweep_job_composes_and_validates(sweep, tmp_path, monkeypatch):
     for job in jobs:
         cfg = compose_train(list(job), tmp_path, config_dir=SWEEPS, name=sweep)
         assert invalid(cfg) is None, job
-        OmegaConf.to_container(cfg.model, resolve=True)
+        module = instantiate(cfg.model)  # the model, its optimiser and scheduler build for every job
+        module.configure_optimizers()
 
 
 def test_baseline_rows_replace_the_model_of_an_experiment(tmp_path):
