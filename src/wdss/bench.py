@@ -139,9 +139,15 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     for column in ("transform", "basis", "head", "params", "GFLOPs", "synthesis", "ms", "time / none", "FLOPs / none"):
         table.add_column(column, justify="left" if column in ("transform", "basis", "head") else "right")
     reference: tuple[float, float] | None = None
-    for transform, basis, head in variants:
-        net = WDSSNet(transform, basis if basis != "-" else "haar", head, **kwargs).to(device).eval()
-        inputs = dummy_inputs(net, height, width, scale, device)
+    others = comparison_models(widths)
+    rows = [(t, b, h, None) for t, b, h in variants] + [(name, "-", "-", net) for name, net in others.items()]
+    for transform, basis, head, other in rows:
+        if other is None:
+            net = WDSSNet(transform, basis if basis != "-" else "haar", head, **kwargs).to(device).eval()
+        else:
+            net = other.to(device).eval()
+        row_scale = float(net.scale) if getattr(net, "fixed_scale", False) else scale
+        inputs = dummy_inputs(net, height, width, row_scale, device)
         total, top = flops(net, inputs)
         ms = forward_ms(net, inputs, repeats=repeats)
         if reference is None:
@@ -153,6 +159,30 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
             f"{ms:.0f}", f"{ms / reference[0]:.3f}", f"{total / reference[1]:.3f}",
         )  # fmt: skip
     return table
+
+
+def comparison_models(widths: str) -> dict:
+    """DFASR, Real-ESRGAN, NSRR and FuseSR (x2) at the given widths, for the inference table."""
+    from wdss.model.fusesr import FuseSR
+    from wdss.model.network import WDSSNet
+    from wdss.model.nsrr import NSRR
+    from wdss.model.rrdbnet import RRDBNet
+
+    dfasr = dict(
+        transform="none",
+        lr_unshuffle=False,
+        gbuffer_channels=[3, 4, 5, 6, 0, 1, 2],
+        fusion_final_relu=True,
+        phase_bias=False,
+        final_relu=False,
+    )
+    small = widths != "paper"
+    return {
+        "DFASR": WDSSNet(**dfasr, **(SMALL_WIDTHS if small else {})),
+        "Real-ESRGAN": RRDBNet(scale=2, **(dict(num_feat=32, num_block=4, num_grow_ch=16) if small else {})),
+        "NSRR": NSRR(),
+        "FuseSR": FuseSR(scale=2),
+    }
 
 
 SMALL_WIDTHS = dict(

@@ -139,7 +139,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
 
     module = instantiate(cfg.model)
     fitting = module.trainable and cfg.get("fit", True)
-    if getattr(module.net, "needs_training", False) and not fitting:
+    if getattr(module.net, "needs_training", False) and not fitting and cfg.get("test"):
         raise ConfigError(
             f"{type(module.net).__name__} has no weights: set model.net.weights to the published file, or train it "
             "on these frames (fit=true); numbers from random weights are never reported"
