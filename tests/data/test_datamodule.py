@@ -304,3 +304,9 @@ def test_rendering_methods_read_only_their_history(root, opened):
     current = batch["target"] / batch["brdf"]
     inside = batch["history2"].abs().sum(1) > 1e-3
     torch.testing.assert_close(batch["history2"][:, :, inside[0]][0], current[0][:, inside[0]], rtol=1e-5, atol=1e-5)
+
+
+def test_patches_round_down_to_a_multiple_of_a_native_scale(root):
+    dataset = FrameDataset([Sequence(root / "seq_a")], ["lr_color", "target"], scale=3.0, patch=14)
+    sample = dataset[0]
+    assert sample["hr"]["color"].shape[-2:] == (12, 12) and sample["lr"]["color"].shape[-2:] == (4, 4)

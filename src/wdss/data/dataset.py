@@ -287,8 +287,7 @@ class FrameDataset(Dataset):
             raise SceneError(f"patch size {size} is larger than the frame ({height}x{width})")
         if native_scale:  # crop on the low-resolution grid so both patches cover the same pixels
             step = round(native_scale)
-            if size % step:
-                raise SceneError(f"patch size {size} is not a multiple of the native scale {step}")
+            size -= size % step  # e.g. 64 -> 63 at 3x: the largest patch that a native LR patch covers exactly
             y = int(torch.randint(0, (height - size) // step + 1, (), generator=rng)) * step
             x = int(torch.randint(0, (width - size) // step + 1, (), generator=rng)) * step
             return (y, x, size), (y // step, x // step, size // step)
