@@ -162,11 +162,11 @@ def test_resume_from_last_continues_the_same_run(tmp_path, tracking):
     with open_dict(second):
         second.paths.log_dir = str(tmp_path)  # where the first run lives
     metrics = train(second)
-    assert metrics["trainer/global_step"] == 2  # one batch per epoch: epoch 0 restored, epoch 1 trained
+    assert metrics["trainer/global_step"] == 4  # two batches per epoch: epoch 0 restored, epoch 1 trained
     runs = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
     assert len(runs) == 1  # the resumed training logged into the same MLflow run
     steps = sorted(m.step for m in tracking.get_metric_history(runs[0].info.run_id, "train/loss"))
-    assert steps == [0, 1]  # step 0 from the first run, step 1 after resuming: nothing trained twice
+    assert steps == [0, 1, 2, 3]  # steps 0-1 from the first run, 2-3 after resuming: nothing trained twice
 
 
 @pytest.mark.slow
