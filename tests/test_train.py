@@ -51,6 +51,26 @@ def compose_train(overrides: list[str], tmp_path: Path | None = None, config_dir
     return cfg
 
 
+def run_module(tmp_path: Path, module: str, *args: str, timeout: int = 600) -> subprocess.CompletedProcess:
+    """``python -m <module> args`` in the project root, tracking to a temporary SQLite file."""
+    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db", "MLFLOW_DISABLE_TELEMETRY": "true"}
+    return subprocess.run(
+        [sys.executable, "-m", module, *args],
+        cwd=PROJECT_ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def sweep_client(tmp_path: Path, experiment: str):
+    from mlflow import MlflowClient
+
+    client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
+    return client, client.search_runs([client.get_experiment_by_name(experiment).experiment_id])
+
+
 def invalid(cfg) -> str | None:
     try:
         validate(cfg)
@@ -172,10 +192,8 @@ def test_resume_from_last_continues_the_same_run(tmp_path, tracking):
 @pytest.mark.slow
 def test_a_tiny_sweep_nests_its_runs_survives_a_failing_job_and_reports(tmp_path):
     """4 jobs, one of which fails (a patch larger than the frame): the others finish, the report marks it."""
-    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db", "MLFLOW_DISABLE_TELEMETRY": "true"}
-    command = [
-        sys.executable,
-        "-m",
+    done = run_module(
+        tmp_path,
         "wdss.train",
         "-cd",
         "sweeps",
@@ -187,26 +205,15 @@ def test_a_tiny_sweep_nests_its_runs_survives_a_failing_job_and_reports(tmp_path
         "seed=0",
         f"paths.log_dir={tmp_path}/outputs",
         "model.flip=true",
-    ]
-    done = subprocess.run(command, cwd=PROJECT_ROOT, env=env, capture_output=True, text=True, timeout=600)
-    assert done.returncode != 0 and "patch size 1000 is larger than the frame" in done.stderr
-    report = subprocess.run(
-        [sys.executable, "-m", "wdss.report", "--sweep", "ablation_wavelet", "--out", str(tmp_path / "reports")],
-        cwd=PROJECT_ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
     )
+    assert done.returncode != 0 and "patch size 1000 is larger than the frame" in done.stderr
+    report = run_module(tmp_path, "wdss.report", "--sweep", "ablation_wavelet", "--out", str(tmp_path / "reports"))
     assert report.returncode == 0, report.stderr[-3000:]
     out = tmp_path / "reports" / "ablation_wavelet"
     table = (out / "table.md").read_text()
     assert "| swt_haar |" in table and "1 of 2 jobs FAILED |" in table and "| bilinear_demodulated |" in table
     assert (out / "tradeoff.png").stat().st_size > 0 and (out / "qualitative.png").stat().st_size > 0
-    from mlflow import MlflowClient
-
-    client = MlflowClient(env["MLFLOW_TRACKING_URI"])
-    runs = client.search_runs([client.get_experiment_by_name("ablation_wavelet").experiment_id])
+    client, runs = sweep_client(tmp_path, "ablation_wavelet")
     parents = [r for r in runs if "mlflow.parentRunId" not in r.data.tags]
     children = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == parents[0].info.run_id]
     assert len(parents) == 1 and len(children) == 4
@@ -255,10 +262,8 @@ def test_ema_weight_averaging_runs(tmp_path, tracking):
 
 @pytest.mark.slow
 def test_parallel_jobs_against_one_sqlite_file_lose_no_run(tmp_path):
-    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db", "MLFLOW_DISABLE_TELEMETRY": "true"}
-    command = [
-        sys.executable,
-        "-m",
+    done = run_module(
+        tmp_path,
         "wdss.train",
         "-cd",
         "sweeps",
@@ -269,13 +274,9 @@ def test_parallel_jobs_against_one_sqlite_file_lose_no_run(tmp_path):
         "seed=0,1",
         "hydra/launcher=parallel",
         f"paths.log_dir={tmp_path}/outputs",
-    ]
-    done = subprocess.run(command, cwd=PROJECT_ROOT, env=env, capture_output=True, text=True, timeout=600)
+    )
     assert done.returncode == 0, done.stderr[-3000:]
-    from mlflow import MlflowClient
-
-    client = MlflowClient(env["MLFLOW_TRACKING_URI"])
-    runs = client.search_runs([client.get_experiment_by_name("ablation_wavelet").experiment_id])
+    _, runs = sweep_client(tmp_path, "ablation_wavelet")
     children = [r for r in runs if "mlflow.parentRunId" in r.data.tags]
     assert len(children) == 4 and all(r.info.status == "FINISHED" for r in children)
     assert all({"test/psnr_2x", "val/psnr", "bench/gflops"} <= set(r.data.metrics) for r in children)
@@ -289,10 +290,8 @@ def test_evaluating_real_esrgan_without_weights_or_training_is_refused(tmp_path,
 
 @pytest.mark.slow
 def test_the_methods_sweep_runs_every_method_at_smoke_scale(tmp_path):
-    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db", "MLFLOW_DISABLE_TELEMETRY": "true"}
-    command = [
-        sys.executable,
-        "-m",
+    done = run_module(
+        tmp_path,
         "wdss.train",
         "-cd",
         "sweeps",
@@ -301,13 +300,10 @@ def test_the_methods_sweep_runs_every_method_at_smoke_scale(tmp_path):
         "experiment=smoke",
         "seed=0",
         f"paths.log_dir={tmp_path}/outputs",
-    ]
-    done = subprocess.run(command, cwd=PROJECT_ROOT, env=env, capture_output=True, text=True, timeout=900)
+        timeout=900,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
-    from mlflow import MlflowClient
-
-    client = MlflowClient(env["MLFLOW_TRACKING_URI"])
-    runs = client.search_runs([client.get_experiment_by_name("methods").experiment_id])
+    _, runs = sweep_client(tmp_path, "methods")
     jobs = {r.data.tags.get("variant"): r for r in runs if "mlflow.parentRunId" in r.data.tags}
     assert set(jobs) == {"bicubic", "bilinear_demodulated", "real_esrgan", "nsrr", "fusesr", "dfasr", "none", "swt_db4"}
     assert all(r.info.status == "FINISHED" and "test/psnr_3x" in r.data.metrics for r in jobs.values())

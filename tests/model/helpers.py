@@ -37,3 +37,16 @@ def batch(n: int = 2, size: tuple[int, int] = (16, 20), scale: float = 2.0, seed
         "sequence": ["synthetic"] * n,
         "frame": torch.arange(n),
     }
+
+
+def losses_over_steps(module, data: dict, steps: int = 2) -> list[float]:
+    """The loss before each of ``steps`` optimiser steps on one fixed batch."""
+    optimizer = module.configure_optimizers()
+    losses = []
+    for _ in range(steps):
+        terms = module._loss(data, module(data))
+        losses.append(float(terms["total"].detach()))
+        optimizer.zero_grad()
+        terms["total"].backward()
+        optimizer.step()
+    return losses

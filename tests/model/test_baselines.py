@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from tests.model.helpers import batch
+from tests.model.helpers import batch, losses_over_steps
 from wdss.model.module import SuperResolutionModule
 from wdss.model.rrdbnet import RRDBNet
 
@@ -68,14 +68,7 @@ def test_one_step_lowers_the_loss(net, temporal):
         optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": 1e-3},
     )
     data = batch(size=(16, 16))
-    optimizer = module.configure_optimizers()
-    losses = []
-    for _ in range(2):
-        terms = module._loss(data, module(data))
-        losses.append(float(terms["total"].detach()))
-        optimizer.zero_grad()
-        terms["total"].backward()
-        optimizer.step()
+    losses = losses_over_steps(module, data)
     assert losses[1] < losses[0]
 
 
@@ -135,12 +128,5 @@ def test_rendering_methods_learn(net, scale):
         net, {"l1": 1.0}, flip=False, optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": 1e-3}
     )
     data = rendering_batch(scale, (18, 18) if scale == 3.0 else (16, 16))
-    optimizer = module.configure_optimizers()
-    losses = []
-    for _ in range(2):
-        terms = module._loss(data, module(data))
-        losses.append(float(terms["total"].detach()))
-        optimizer.zero_grad()
-        terms["total"].backward()
-        optimizer.step()
+    losses = losses_over_steps(module, data)
     assert losses[1] < losses[0]

@@ -7,7 +7,7 @@ import pytest
 import torch
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
-from tests.model.helpers import TINY, batch
+from tests.model.helpers import TINY, batch, losses_over_steps
 from tests.model.test_network import VARIANTS
 from wdss.model.losses import WDSSLoss, temporal_difference_loss
 from wdss.model.metrics import LPIPS, psnr, ssim
@@ -38,14 +38,7 @@ def test_one_step_lowers_the_loss_on_a_fixed_batch(transform, basis, head, tempo
         transform, basis, head, temporal, optimizer={"_target_": "torch.optim.Adam", "_partial_": True, "lr": 1e-3}
     )
     data = batch(size=(16, 16))
-    optimizer = model.configure_optimizers()
-    losses = []
-    for _ in range(2):
-        terms = model._loss(data, model(data))
-        losses.append(float(terms["total"].detach()))
-        optimizer.zero_grad()
-        terms["total"].backward()
-        optimizer.step()
+    losses = losses_over_steps(model, data)
     assert losses[1] < losses[0]
     if transform != "none":
         assert "wavelet" in model._loss(data, model(data))
