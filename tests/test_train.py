@@ -64,6 +64,22 @@ def run_module(tmp_path: Path, module: str, *args: str, timeout: int = 600) -> s
     )
 
 
+def run_sweep(tmp_path: Path, name: str, *args: str, timeout: int = 600) -> subprocess.CompletedProcess:
+    """A sweep of ``sweeps/<name>.yaml`` at smoke scale, its outputs and tracking under ``tmp_path``."""
+    return run_module(
+        tmp_path,
+        "wdss.train",
+        "-cd",
+        "sweeps",
+        "-cn",
+        name,
+        "experiment=smoke",
+        f"paths.log_dir={tmp_path}/outputs",
+        *args,
+        timeout=timeout,
+    )
+
+
 def sweep_client(tmp_path: Path, experiment: str):
     from mlflow import MlflowClient
 
@@ -192,18 +208,12 @@ def test_resume_from_last_continues_the_same_run(tmp_path, tracking):
 @pytest.mark.slow
 def test_a_tiny_sweep_nests_its_runs_survives_a_failing_job_and_reports(tmp_path):
     """4 jobs, one of which fails (a patch larger than the frame): the others finish, the report marks it."""
-    done = run_module(
+    done = run_sweep(
         tmp_path,
-        "wdss.train",
-        "-cd",
-        "sweeps",
-        "-cn",
         "ablation_wavelet",
-        "experiment=smoke",
         "variant=swt_haar,bilinear_demodulated",
         "data.patch_size=24,1000",
         "seed=0",
-        f"paths.log_dir={tmp_path}/outputs",
         "model.flip=true",
     )
     assert done.returncode != 0 and "patch size 1000 is larger than the frame" in done.stderr
@@ -262,19 +272,7 @@ def test_ema_weight_averaging_runs(tmp_path, tracking):
 
 @pytest.mark.slow
 def test_parallel_jobs_against_one_sqlite_file_lose_no_run(tmp_path):
-    done = run_module(
-        tmp_path,
-        "wdss.train",
-        "-cd",
-        "sweeps",
-        "-cn",
-        "ablation_wavelet",
-        "experiment=smoke",
-        "variant=none,dwt_haar",
-        "seed=0,1",
-        "hydra/launcher=parallel",
-        f"paths.log_dir={tmp_path}/outputs",
-    )
+    done = run_sweep(tmp_path, "ablation_wavelet", "variant=none,dwt_haar", "seed=0,1", "hydra/launcher=parallel")
     assert done.returncode == 0, done.stderr[-3000:]
     _, runs = sweep_client(tmp_path, "ablation_wavelet")
     children = [r for r in runs if "mlflow.parentRunId" in r.data.tags]
@@ -290,18 +288,7 @@ def test_evaluating_real_esrgan_without_weights_or_training_is_refused(tmp_path,
 
 @pytest.mark.slow
 def test_the_methods_sweep_runs_every_method_at_smoke_scale(tmp_path):
-    done = run_module(
-        tmp_path,
-        "wdss.train",
-        "-cd",
-        "sweeps",
-        "-cn",
-        "methods",
-        "experiment=smoke",
-        "seed=0",
-        f"paths.log_dir={tmp_path}/outputs",
-        timeout=900,
-    )
+    done = run_sweep(tmp_path, "methods", "seed=0", timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
     _, runs = sweep_client(tmp_path, "methods")
     jobs = {r.data.tags.get("variant"): r for r in runs if "mlflow.parentRunId" in r.data.tags}

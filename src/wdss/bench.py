@@ -127,11 +127,11 @@ def bench_data(size: tuple[int, int], frames: int, repeats: int, scale: float) -
 
 def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, widths: str = "paper") -> Table:
     """Whole-forward time and FLOPs of every transform x basis x head, with ratios to ``none`` (one run)."""
-    from wdss.model.network import HEADS, WDSSNet
+    from wdss.model.network import HEADS, WIDTHS, WDSSNet
     from wdss.model.profile import dummy_inputs, flops, forward_ms
 
     height, width = size
-    kwargs = {} if widths == "paper" else SMALL_WIDTHS
+    kwargs = {} if widths == "paper" else WIDTHS["small"]
     variants = [("none", "-", "shared_inr")] + [(t, b, h) for t in ("dwt", "swt") for b in BASES for h in HEADS]
     table = Table(
         title=f"inference at {width}x{height} output, {scale}x, {widths} widths, {device}, median of {repeats}"
@@ -164,7 +164,7 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
 def comparison_models(widths: str) -> dict:
     """DFASR, Real-ESRGAN, NSRR and FuseSR (x2) at the given widths, for the inference table."""
     from wdss.model.fusesr import FuseSR
-    from wdss.model.network import WDSSNet
+    from wdss.model.network import WIDTHS, WDSSNet
     from wdss.model.nsrr import NSRR
     from wdss.model.rrdbnet import RRDBNet
 
@@ -178,17 +178,11 @@ def comparison_models(widths: str) -> dict:
     )
     small = widths != "paper"
     return {
-        "DFASR": WDSSNet(**dfasr, **(SMALL_WIDTHS if small else {})),
+        "DFASR": WDSSNet(**dfasr, **(WIDTHS["small"] if small else {})),
         "Real-ESRGAN": RRDBNet(scale=2, **(dict(num_feat=32, num_block=4, num_grow_ch=16) if small else {})),
         "NSRR": NSRR(),
         "FuseSR": FuseSR(scale=2),
     }
-
-
-SMALL_WIDTHS = dict(
-    lr_widths=(16, 24, 24, 32), gbuffer_width=32, temporal_widths=(16, 16, 8), fusion_widths=(32, 24),
-    inr_width=32, mlp_width=32, mlp_depth=2, multi_inr_width=16,
-)  # fmt: skip
 
 
 def bench_stability() -> Table:

@@ -164,20 +164,10 @@ def _metric_cases() -> list[Case]:
 
 def _network_cases() -> list[Case]:
     from wdss.data.sampling import lr_size
-    from wdss.model.network import WDSSNet
+    from wdss.model.network import WIDTHS, WDSSNet
 
     torch.manual_seed(0)
-    tiny = dict(
-        lr_widths=(8, 8, 8, 8),
-        gbuffer_width=8,
-        temporal_widths=(8, 4),
-        fusion_widths=(8,),
-        inr_width=8,
-        mlp_width=8,
-        mlp_depth=1,
-        multi_inr_width=4,
-    )
-    net = WDSSNet("swt", "db4", **tiny)
+    net = WDSSNet("swt", "db4", **WIDTHS["tiny"])
     cases = []
     for scale in (1.0, 1.01, 2.37, 4.0, 8.0):
         h, w = 37, 53  # divisible by none of the scales
@@ -207,19 +197,10 @@ def _autocast_cases() -> list[Case]:
     from wdss.model.module import SuperResolutionModule
 
     torch.manual_seed(0)
-    net = {
-        "_target_": "wdss.model.network.WDSSNet",
-        "transform": "swt",
-        "basis": "db4",
-        "lr_widths": [8, 8, 8, 8],
-        "gbuffer_width": 8,
-        "temporal_widths": [8, 4],
-        "fusion_widths": [8],
-        "inr_width": 8,
-        "mlp_width": 8,
-        "mlp_depth": 1,
-        "multi_inr_width": 4,
-    }
+    from wdss.model.network import WIDTHS
+
+    tiny = {k: list(v) if isinstance(v, tuple) else v for k, v in WIDTHS["tiny"].items()}
+    net = {"_target_": "wdss.model.network.WDSSNet", "transform": "swt", "basis": "db4", **tiny}
     module = SuperResolutionModule(net, {"l1": 1.0, "ssim": 0.4, "wavelet": 0.1}, flip=False)
     h, w = 16, 16
     batch = {

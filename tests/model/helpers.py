@@ -5,17 +5,9 @@ from __future__ import annotations
 import torch
 
 from wdss.data.sampling import lr_size
+from wdss.model.network import WIDTHS
 
-TINY = dict(
-    lr_widths=(8, 8, 8, 8),
-    gbuffer_width=8,
-    temporal_widths=(8, 4),
-    fusion_widths=(8,),
-    inr_width=8,
-    mlp_width=8,
-    mlp_depth=1,
-    multi_inr_width=4,
-)
+TINY = WIDTHS["tiny"]
 
 
 def batch(n: int = 2, size: tuple[int, int] = (16, 20), scale: float = 2.0, seed: int = 0) -> dict:

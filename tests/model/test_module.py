@@ -12,6 +12,7 @@ from tests.model.test_network import VARIANTS
 from wdss.model.losses import WDSSLoss, temporal_difference_loss
 from wdss.model.metrics import LPIPS, psnr, ssim
 from wdss.model.module import SuperResolutionModule
+from wdss.model.network import WIDTHS
 
 WEIGHTS = {"l1": 1.0, "ssim": 0.4, "masked_l1": 0.1, "wavelet": 0.1}
 
@@ -51,16 +52,7 @@ def test_the_small_preset_overfits_one_fixture_patch():
     from wdss.data import SceneDataModule
 
     torch.manual_seed(0)
-    small = dict(
-        lr_widths=(16, 24, 24, 32),
-        gbuffer_width=32,
-        temporal_widths=(16, 16, 8),
-        fusion_widths=(32, 24),
-        inr_width=32,
-        mlp_width=32,
-        mlp_depth=2,
-        multi_inr_width=16,
-    )
+    small = WIDTHS["small"]
     model = module(
         "swt",
         "db4",

@@ -226,7 +226,7 @@ class FrameDataset(Dataset):
             "prev2": (frame - 2, seq.hr, need["prev2"]),
         }
         available = set(seq.frames)
-        out: dict = {"sequence": seq.name, "frame": frame, "has_history": frame - 1 in available}
+        out: dict = {"sequence": seq.name, "frame": frame}
         shapes: dict[int | None, tuple[int, int]] = {}
         for role, (number, height, buffers) in reads.items():
             if not buffers:
@@ -272,7 +272,6 @@ class FrameDataset(Dataset):
                     camera = seq.camera(step["frame"] - _OFFSET[role])
                     camera = seq.camera(step["frame"]) if camera is None else camera
                     step[role] = flip(step[role], horizontal=flips[0], vertical=flips[1], camera=camera)
-            del step["has_history"]
             step["seed"] = _mix(self.seed, epoch, index) if epoch is not None else None
         return steps[0] if self.sequence_length == 1 else {"steps": steps}
 

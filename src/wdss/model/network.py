@@ -23,9 +23,33 @@ from torch import Tensor, nn
 from wdss.model.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3
 from wdss.wavelets import WaveletTransform
 
-__all__ = ["HEADS", "WDSSNet"]
+__all__ = ["HEADS", "WIDTHS", "WDSSNet"]
 
 HEADS = ("shared_inr", "multi_inr", "fusion_ll")
+# Width presets besides the paper's defaults (conf/model/small.yaml mirrors "small"): "small" trains in minutes
+# on 2 CPU cores; "tiny" is for tests and stability checks.
+WIDTHS: dict[str, dict] = {
+    "small": dict(
+        lr_widths=(16, 24, 24, 32),
+        gbuffer_width=32,
+        temporal_widths=(16, 16, 8),
+        fusion_widths=(32, 24),
+        inr_width=32,
+        mlp_width=32,
+        mlp_depth=2,
+        multi_inr_width=16,
+    ),
+    "tiny": dict(
+        lr_widths=(8, 8, 8, 8),
+        gbuffer_width=8,
+        temporal_widths=(8, 4),
+        fusion_widths=(8,),
+        inr_width=8,
+        mlp_width=8,
+        mlp_depth=1,
+        multi_inr_width=4,
+    ),
+}
 GBUFFER_CHANNELS = 11  # wdss.data.GBUFFER_STACK
 RGB = 3
 
