@@ -23,6 +23,7 @@ GROUPS = (
     "scale",
     "temporal",
     "model",
+    "size",
     "loss",
     "data",
     "trainer",

@@ -32,6 +32,7 @@ GROUPS = (
     "scale",
     "temporal",
     "model",
+    "size",
     "loss",
     "data",
     "trainer",

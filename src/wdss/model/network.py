@@ -26,7 +26,7 @@ from wdss.wavelets import WaveletTransform
 __all__ = ["HEADS", "WIDTHS", "WDSSNet"]
 
 HEADS = ("shared_inr", "multi_inr", "fusion_ll")
-# Width presets besides the paper's defaults (conf/model/small.yaml mirrors "small"): "small" trains in minutes
+# Width presets besides the paper's defaults (conf/size/small.yaml mirrors "small"): "small" trains in minutes
 # on 2 CPU cores; "tiny" is for tests and stability checks.
 WIDTHS: dict[str, dict] = {
     "small": dict(
