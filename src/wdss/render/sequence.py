@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import sys
 import time
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -29,7 +30,7 @@ from wdss.data.layouts import UnrealLayout
 from wdss.data.sampling import lr_size, point_sample
 from wdss.render.spec import SceneSpec, camera_pose, intrinsics, random_scene
 
-__all__ = ["frame_files", "render_preset", "render_sequence", "render_sequences"]
+__all__ = ["frame_files", "preset_settings", "render_preset", "render_sequence", "render_sequences"]
 
 log = logging.getLogger(__name__)
 
@@ -187,7 +188,9 @@ def render_sequences(out_dir: str | Path, sequences: Iterable[Mapping[str, Any]]
         TextColumn("{task.fields[rate]}"),
         TimeRemainingColumn(),
     )
-    with _RateProgress(*columns, transient=False) as progress:
+    # rich draws nothing into a log file or pipe (e.g. `make data > log`): plain lines there instead
+    reporter = _RateProgress(*columns, transient=False) if sys.stdout.isatty() else _LineProgress()
+    with reporter as progress:
         folders = []
         for seq in sequences:
             overrides = {k: v for k, v in seq.items() if k not in ("name", "seed")}  # e.g. per-sequence frames
@@ -211,17 +214,70 @@ class _RateProgress(Progress):
         self.update(task_id, rate=f"{speed:.2f} frames/s" if speed else "")
 
 
-def render_preset(out_dir: str | Path, name: str = "mini") -> list[Path]:
-    """Render the sequences of ``conf/render/<name>.yaml`` into ``out_dir`` (a DataModule's ``prepare``)."""
-    from hydra import compose, initialize_config_dir
-    from omegaconf import OmegaConf
+class _LineProgress:
+    """The part of rich's Progress that :func:`render_sequence` uses, as one flushed line per finished frame."""
+
+    def __init__(self) -> None:
+        self._tasks: list[dict[str, Any]] = []
+
+    def __enter__(self) -> _LineProgress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def add_task(self, description: str, total: float, completed: float = 0, **_: Any) -> int:
+        done = int(completed)
+        self._tasks.append({"name": description, "total": int(total), "done": done, "resumed": done})
+        self._tasks[-1]["start"] = time.perf_counter()
+        if completed:
+            print(f"render {description}: {int(completed)}/{int(total)} frames already on disk", flush=True)
+        return len(self._tasks) - 1
+
+    def advance(self, task_id: int, advance: float = 1) -> None:
+        task = self._tasks[task_id]
+        task["done"] += int(advance)
+        # Seconds per frame rendered by this run (the scene's set-up included), not counting resumed frames.
+        rate = (time.perf_counter() - task["start"]) / max(task["done"] - task["resumed"], 1)
+        eta = _duration(rate * (task["total"] - task["done"]))
+        line = f"render {task['name']}: frame {task['done']}/{task['total']} ({rate:.1f} s/frame, ETA {eta})"
+        print(line, flush=True)
+
+
+def _duration(seconds: float) -> str:
+    """``1h02m``, ``1m32s`` or ``45s``."""
+    minutes, secs = divmod(round(seconds), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}h{minutes:02d}m" if hours else f"{minutes}m{secs:02d}s" if minutes else f"{secs}s"
+
+
+def preset_settings(name: str) -> dict[str, Any]:
+    """The settings of ``conf/render/<name>.yaml`` exactly as ``python -m wdss.render -cn <name>`` composes them.
+
+    A config loader of its own composes the preset, not ``hydra.initialize_config_dir``: that refuses to run
+    inside a Hydra app (``wdss.train``, whose DataModule renders its dataset on first use), and the app's
+    own loader may not search ``conf/render``. The ``hydra`` node of the preset is dropped.
+    """
+    from hydra import version
+    from hydra._internal.config_loader_impl import ConfigLoaderImpl
+    from hydra._internal.utils import create_config_search_path
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf, open_dict
 
     from wdss.paths import CONF_DIR
 
-    with initialize_config_dir(config_dir=str(CONF_DIR / "render"), version_base="1.3"):
-        cfg = compose(config_name=name)
-    settings = OmegaConf.to_container(cfg, resolve=True)
+    version.setbase("1.3")  # as `python -m wdss.render` (every entry point of the project uses 1.3)
+    loader = ConfigLoaderImpl(config_search_path=create_config_search_path(str(CONF_DIR / "render")))
+    cfg = loader.load_configuration(config_name=name, overrides=[], run_mode=RunMode.RUN, from_shell=False)
+    with open_dict(cfg):
+        del cfg["hydra"]
+    return OmegaConf.to_container(cfg, resolve=True)
+
+
+def render_preset(out_dir: str | Path, name: str = "mini") -> list[Path]:
+    """Render the sequences of ``conf/render/<name>.yaml`` into ``out_dir`` (a DataModule's ``prepare``)."""
+    settings = preset_settings(name)
     for key in ("out_dir", "preview", "preview_frame"):
         settings.pop(key, None)
-    print(f"wdss: rendering the {name!r} dataset into {out_dir} (Blender Cycles on the CPU; resumable)")
+    print(f"wdss: rendering the {name!r} dataset into {out_dir} (Blender Cycles on the CPU; resumable)", flush=True)
     return render_sequences(out_dir, settings.pop("sequences"), **settings)
