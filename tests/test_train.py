@@ -157,6 +157,17 @@ def test_baseline_rows_replace_the_model_of_an_experiment(tmp_path):
     assert cfg.model.net._target_ == "wdss.model.baselines.Upsample" and cfg.model.net.mode == "bicubic"
 
 
+def test_joint_bilateral_is_a_baseline_row(tmp_path):
+    from wdss.tracking import run_tags
+
+    cfg = compose_train(["experiment=cpu", "variant=joint_bilateral"], tmp_path)
+    assert invalid(cfg) is None and cfg.model.net.sigma_depth == 0.01 and cfg.model.net.radius == 2
+    module = instantiate(cfg.model)
+    assert not module.trainable and module.configure_optimizers() is None
+    assert set(module.inputs) == {"lr", "gbuffer", "brdf", "target"}  # no history: temporal none
+    assert run_tags(cfg)["transform"] == run_tags(cfg)["temporal"] == "n/a (baseline)"
+
+
 @pytest.fixture
 def tracking(tmp_path, monkeypatch):
     uri = f"sqlite:///{tmp_path}/mlflow.db"
@@ -293,7 +304,8 @@ def test_the_methods_sweep_runs_every_method_at_smoke_scale(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     _, runs = sweep_client(tmp_path, "methods")
     jobs = {r.data.tags.get("variant"): r for r in runs if "mlflow.parentRunId" in r.data.tags}
-    assert set(jobs) == {"bicubic", "bilinear_demodulated", "real_esrgan", "nsrr", "fusesr", "dfasr", "none", "swt_db4"}
+    methods = {"bicubic", "bilinear_demodulated", "joint_bilateral", "real_esrgan", "nsrr", "fusesr", "dfasr"}
+    assert set(jobs) == methods | {"none", "swt_db4"}
     assert all(r.info.status == "FINISHED" and "test/psnr_3x" in r.data.metrics for r in jobs.values())
     assert jobs["real_esrgan"].data.tags["weights"] == "trained-on-wdss-frames"
     assert jobs["dfasr"].data.tags["temporal"] == "recurrent"

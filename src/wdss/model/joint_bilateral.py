@@ -1,0 +1,130 @@
+"""Joint bilateral upsampling of the demodulated irradiance, guided by the high-resolution G-buffer.
+
+A classical, parameter-free baseline (after Kopf et al., "Joint bilateral upsampling", 2007): every
+high-resolution pixel takes a weighted mean of the ``2 radius x 2 radius`` low-resolution pixels around its
+position in low-resolution coordinates (``u = (x + 0.5) w / W - 0.5``, cell centres aligned as in
+:mod:`wdss.data.sampling`). The weight is a separable tent ``max(0, 1 - |u - j| / radius)`` per axis times a
+range term comparing the pixel's depth, normal and albedo with those of the low-resolution pixel, whose
+G-buffer is the high-resolution one point-sampled exactly as the data samples its low-resolution frames:
+
+    exp(-dz^2 / (2 sigma_depth^2) - (1 - n.n') / sigma_normal - |da|^2 / (2 sigma_albedo^2))
+
+The normal term is computed as ``|n - n'|^2 / 2``, which equals ``1 - n.n'`` for unit normals and is also 0
+between identical non-unit normals (zero normals of empty pixels), so identical guides always weigh 1.
+Where no neighbour is similar the range terms vanish; a tiny floor :data:`FALLBACK_WEIGHT` added to every
+range weight then makes the result the spatial (tent) interpolation instead of 0/0, smoothly, so the
+function stays differentiable and NaN-free. Range exponents are capped at 30 (a weight of 1e-13, far below
+the floor; exp() of large arguments is slow). Neighbours outside the frame repeat the border pixel.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+
+from wdss.data.sampling import point_sample
+
+__all__ = ["FALLBACK_WEIGHT", "JointBilateralUpsample", "joint_bilateral_upsample"]
+
+# Added to every range weight: negligible next to a similar neighbour (weight ~1), decisive when none is.
+FALLBACK_WEIGHT = 1e-6
+# Range exponents beyond this give weights far below the floor; capping them keeps exp() off its slow path.
+_MAX_EXPONENT = 30.0
+
+
+def _taps(hr: int, lr: int, radius: int, device: torch.device) -> list[tuple[Tensor, Tensor]]:
+    """Per tap offset along one axis: the clamped LR index and the tent weight of every HR position."""
+    # float64 positions: floor() must not flip at exact cell boundaries for any size.
+    u = (torch.arange(hr, device=device, dtype=torch.float64) + 0.5) * (lr / hr) - 0.5
+    base = torch.floor(u)
+    taps = []
+    for k in range(1 - radius, radius + 1):
+        j = base + k
+        weight = (1.0 - (u - j).abs() / radius).clamp_min(0.0)
+        taps.append((j.long().clamp(0, lr - 1), weight))
+    return taps
+
+
+def joint_bilateral_upsample(
+    lr: Tensor,
+    gbuffer: Tensor,
+    *,
+    sigma_depth: float = 0.01,
+    sigma_normal: float = 0.1,
+    sigma_albedo: float = 0.1,
+    radius: int = 2,
+) -> Tensor:
+    """Upsample ``lr`` (N, C, h, w) to the grid of ``gbuffer`` (N, 11, H, W), guided by its depth, normal, albedo.
+
+    See the module docstring for the weights. Returns (N, C, H, W) in ``lr``'s dtype; a convex combination of
+    ``lr`` values, so non-negative input stays non-negative.
+    """
+    if int(radius) != radius or radius < 1:
+        raise ValueError(f"radius must be a positive integer, got {radius}")
+    if min(sigma_depth, sigma_normal, sigma_albedo) <= 0:
+        raise ValueError("sigma_depth, sigma_normal and sigma_albedo must be positive")
+    if lr.shape[0] != gbuffer.shape[0] or gbuffer.shape[1] < 7:
+        raise ValueError(f"lr {tuple(lr.shape)} and gbuffer {tuple(gbuffer.shape)} do not form a batch")
+    radius = int(radius)
+    (h, w), (height, width) = lr.shape[-2:], gbuffer.shape[-2:]
+    guide = gbuffer[:, :7].to(lr.dtype)
+    lr_guide = point_sample(guide, (h, w))
+    # Scaled guides turn each range term into a plain squared distance: exponent = -|g - g'|^2 summed.
+    scales = torch.tensor(
+        [1 / (math.sqrt(2) * sigma_albedo)] * 3
+        + [1 / (math.sqrt(2) * sigma_depth)]
+        + [1 / math.sqrt(2 * sigma_normal)] * 3,
+        dtype=lr.dtype,
+        device=lr.device,
+    ).view(1, 7, 1, 1)
+    guide, lr_guide = guide * scales, lr_guide * scales
+    source = torch.cat([lr, lr_guide], dim=1)  # gathered together: one index op per tap
+    channels = lr.shape[1]
+
+    rows, cols = _taps(height, h, radius, lr.device), _taps(width, w, radius, lr.device)
+    total = lr.new_zeros(lr.shape[0], 1, height, width)
+    accumulated = lr.new_zeros(lr.shape[0], channels, height, width)
+    # Columns first, on the LR rows: the per-tap row gathers then copy whole contiguous rows, the cheap axis.
+    for col_index, col_weight in cols:
+        source_cols = source.index_select(3, col_index)
+        for row_index, row_weight in rows:
+            neighbour = source_cols.index_select(2, row_index)
+            spatial = (row_weight[:, None] * col_weight[None, :]).to(lr.dtype)
+            difference = guide - neighbour[:, channels:]
+            distance = (difference * difference).sum(1, keepdim=True).clamp_max(_MAX_EXPONENT)
+            weight = spatial * (torch.exp(-distance) + FALLBACK_WEIGHT)
+            accumulated = accumulated + weight * neighbour[:, :channels]
+            total = total + weight
+    # The spatial weights of the taps sum to radius^2 > 0, so total >= FALLBACK_WEIGHT * radius^2.
+    return accumulated / total
+
+
+class JointBilateralUpsample(nn.Module):
+    """Parameter-free baseline: :func:`joint_bilateral_upsample` of the demodulated LR irradiance."""
+
+    def __init__(
+        self, sigma_depth: float = 0.01, sigma_normal: float = 0.1, sigma_albedo: float = 0.1, radius: int = 2
+    ) -> None:
+        super().__init__()
+        if int(radius) != radius or radius < 1 or min(sigma_depth, sigma_normal, sigma_albedo) <= 0:
+            raise ValueError(f"radius must be a positive integer and sigmas positive, got radius={radius}")
+        self.sigma_depth, self.sigma_normal, self.sigma_albedo = sigma_depth, sigma_normal, sigma_albedo
+        self.radius = int(radius)
+        self.transform = "none"
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return ("lr", "gbuffer")
+
+    def forward(self, lr: Tensor, gbuffer: Tensor, **_: Tensor) -> dict:
+        irradiance = joint_bilateral_upsample(
+            lr,
+            gbuffer,
+            sigma_depth=self.sigma_depth,
+            sigma_normal=self.sigma_normal,
+            sigma_albedo=self.sigma_albedo,
+            radius=self.radius,
+        )
+        return {"irradiance": irradiance, "coefficients": None}
