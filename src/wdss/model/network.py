@@ -8,7 +8,9 @@ Grids: every input is ``pixel_unshuffle``d by 2, so features live on half-resolu
 of ``h/2 x w/2`` cells and the HR/2 grid of ``H/2 x W/2`` cells, both spanning the frame (cell centres in
 ``[-1, 1]``, LIIF's convention, matching :mod:`wdss.data.sampling`). Each HR/2 cell takes the amplitude of
 its nearest LR/2 cell and knows its offset ``delta`` from that cell's centre, in LR/2 cells (``|delta| <=
-1``). Odd frame sizes are padded to even (replicating the border) and cropped back.
+1``). Odd frame sizes are padded to even (replicating the border) and cropped back; the grids are placed by
+the real pixel counts, so an odd frame's last cell (its last pixel and the padding) sits half outside the
+frame and the LR/2 and HR/2 grids stay registered (:func:`cell_grid`, :func:`resample_to_cells`).
 """
 
 from __future__ import annotations
@@ -116,13 +118,44 @@ class TemporalExtractor(nn.Module):
         return x
 
 
-def cell_grid(hr: int, lr: int, device: torch.device, dtype: torch.dtype) -> tuple[Tensor, Tensor]:
-    """For ``hr`` HR/2 cells and ``lr`` LR/2 cells spanning the same extent along one axis: the index of each
-    HR/2 cell's nearest LR/2 cell and the offset from its centre in LR/2 cells (in ``[-1, 1]``)."""
-    coord = (2 * torch.arange(hr, device=device, dtype=torch.float64) + 1) / hr - 1  # cell centres in [-1, 1]
-    index = ((coord + 1) / 2 * lr).floor().clamp(0, lr - 1)
+def _cell_centres(hr_pixels: int, device: torch.device) -> Tensor:
+    """The centres of the HR/2 cells (HR pixels ``2j, 2j + 1``) along one axis of a frame of ``hr_pixels``, the
+    frame spanning ``[-1, 1]``. With an odd count the last cell is the last pixel and its padding: its centre is
+    the frame's edge (a grid of ``ceil(n / 2)`` cells spans ``(n + 1) / n`` of the frame, not all of it)."""
+    half = hr_pixels / 2
+    return (2 * torch.arange(math.ceil(half), device=device, dtype=torch.float64) + 1) / half - 1
+
+
+def cell_grid(
+    hr_pixels: int, lr_pixels: int, device: torch.device, dtype: torch.dtype, lr_cell: int = 2
+) -> tuple[Tensor, Tensor]:
+    """Along one axis of an HR frame of ``hr_pixels`` and its LR frame of ``lr_pixels`` (real pixel counts): the
+    index of each HR/2 cell's nearest LR cell and the offset from that cell's centre (in half cells, LIIF's
+    ``[-1, 1]``). An LR cell is ``lr_cell`` LR pixels: 2 on the LR/2 grid, 1 on DFASR's full LR grid."""
+    coord = _cell_centres(hr_pixels, device)
+    lr = lr_pixels / lr_cell  # LR cells across the frame (x.5 for an odd frame on the LR/2 grid)
+    index = ((coord + 1) / 2 * lr).floor().clamp(0, math.ceil(lr) - 1)
     centre = (2 * index + 1) / lr - 1
     return index.long(), ((coord - centre) * lr).to(dtype)
+
+
+def resample_to_cells(x: Tensor, hr_size: Sequence[int], lr_size: Sequence[int], lr_cell: int = 2) -> Tensor:
+    """Bilinear samples of LR-cell features ``x`` at the HR/2 cell centres, both grids placed by the frames'
+    real pixel counts (``hr_size``, ``lr_size``) as in :func:`cell_grid`; beyond the outer cell centres, the
+    border value."""
+    padded = any(n % 2 for n in hr_size) or (lr_cell == 2 and any(n % 2 for n in lr_size))
+    if not padded:  # both grids span the frame exactly: F.interpolate places them alike
+        half = tuple(n // 2 for n in hr_size)
+        return F.interpolate(x, size=half, mode="bilinear", align_corners=False)
+    for axis, hr_pixels, lr_pixels in ((-2, hr_size[0], lr_size[0]), (-1, hr_size[1], lr_size[1])):
+        n = x.shape[axis]
+        # Each HR/2 centre in LR-cell index units (cell i centred at i), clamped: edge replication.
+        at = ((_cell_centres(hr_pixels, x.device) + 1) / 2 * (lr_pixels / lr_cell) - 0.5).clamp(0, n - 1)
+        low = at.floor().long()
+        high = (low + 1).clamp_max(n - 1)
+        t = (at - low).to(x.dtype).view([-1] + [1] * (-axis - 1))
+        x = x.index_select(axis, low) * (1 - t) + x.index_select(axis, high) * t
+    return x
 
 
 class FourierINR(nn.Module):
@@ -163,11 +196,23 @@ class FourierINR(nn.Module):
             )
         self.exit = conv3x3(out_channels, out_channels)
 
-    def forward(self, lr_feature: Tensor, gb_feature: Tensor, scale: Tensor) -> Tensor:
+    def forward(
+        self,
+        lr_feature: Tensor,
+        gb_feature: Tensor,
+        scale: Tensor,
+        hr_size: Sequence[int] | None = None,
+        lr_size: Sequence[int] | None = None,
+        lr_cell: int = 2,
+    ) -> Tensor:
+        """``hr_size``, ``lr_size``: the frames' real pixel counts (default: the grids span them exactly);
+        ``lr_cell``: LR pixels per cell of ``lr_feature`` (see :func:`cell_grid`)."""
         n, _, hh, wh = gb_feature.shape
         hl, wl = lr_feature.shape[-2:]
-        rows, dy = cell_grid(hh, hl, gb_feature.device, gb_feature.dtype)
-        cols, dx = cell_grid(wh, wl, gb_feature.device, gb_feature.dtype)
+        hr_size = hr_size or (2 * hh, 2 * wh)
+        lr_size = lr_size or (lr_cell * hl, lr_cell * wl)
+        rows, dy = cell_grid(hr_size[0], lr_size[0], gb_feature.device, gb_feature.dtype, lr_cell)
+        cols, dx = cell_grid(hr_size[1], lr_size[1], gb_feature.device, gb_feature.dtype, lr_cell)
         amplitude = self.amplitude(lr_feature).index_select(-2, rows).index_select(-1, cols)
         frequency = self.frequency(gb_feature).view(n, self.pairs, 2, hh, wh)
         phase = self.phase((1.0 / scale).view(n, 1).to(gb_feature.dtype)).view(n, self.pairs, 1, 1)
@@ -278,6 +323,7 @@ class WDSSNet(nn.Module):
         height, width = gbuffer.shape[-2:]
         pad_hr = (0, width % 2, 0, height % 2)
         pad_lr = (0, lr.shape[-1] % 2, 0, lr.shape[-2] % 2)
+        lr_cell = 2 if self.lr_unshuffle else 1  # LR pixels per cell of the LR features
         if self.lr_unshuffle:
             lr_in = F.pixel_unshuffle(F.pad(self._to_input(lr), pad_lr, mode="replicate"), 2)
         else:
@@ -287,15 +333,14 @@ class WDSSNet(nn.Module):
         gb_in = F.pixel_unshuffle(F.pad(torch.cat([gbuffer, spatial_mask], 1), pad_hr, mode="replicate"), 2)
         lr_fusion, lr_inr = self.lr(lr_in)
         gb_fusion, gb_inr = self.gbuffer(gb_in)
-        half = gb_in.shape[-2:]
-        parts = [F.interpolate(lr_fusion, size=half, mode="bilinear", align_corners=False), gb_fusion]
+        parts = [resample_to_cells(lr_fusion, (height, width), lr.shape[-2:], lr_cell), gb_fusion]
         if self.temporal_branch is not None:
             if history is None or temporal_mask is None:
                 raise ValueError("this network has a temporal branch: it needs history and temporal_mask")
             t_in = torch.cat([self._to_input(history), temporal_mask], 1)
             parts.append(self.temporal_branch(F.pixel_unshuffle(F.pad(t_in, pad_hr, mode="replicate"), 2)))
         fusion = self.fusion(torch.cat(parts, 1))
-        inr = self.inr(lr_inr, gb_inr, scale)
+        inr = self.inr(lr_inr, gb_inr, scale, (height, width), lr.shape[-2:], lr_cell)
         merged = torch.cat([fusion, inr], 1) if self.head == "fusion_ll" else fusion + inr
         coefficients: Tensor | None
         if self.transform == "none":
