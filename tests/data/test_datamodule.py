@@ -289,7 +289,9 @@ def test_rendering_methods_read_only_their_history(root, opened):
     )
     sample = nsrr[0]  # frame 2: its previous frame from the native 8P folder
     previous = [n for n in opened if ".0001." in n]
-    assert previous and all(n.startswith("8P/") for n in previous)
+    # ... and of the HR frame, only the depth plane: the range that normalises the LR depth
+    assert previous and {n for n in previous if not n.startswith("8P/")} == {"24P/BaseColorDepth.0001.exr"}
+    assert sample["prev"] == {}
     assert sample["prev_lr"]["color"].shape == (3, 8, 12)
     opened.clear()
     fusesr = FrameDataset(

@@ -60,7 +60,7 @@ class Preprocessing:
     brdf: str = "extranet"  # extranet | split_sum
     demodulate: bool = True  # lr and history are irradiance (colour / F) rather than colour
     depth_far: float | None = 100.0  # depth beyond this is background: set to 0 (the authors' loader)
-    depth_normalize: bool = True  # per-frame min-max normalisation of depth (DFASR)
+    depth_normalize: bool = True  # per-frame min-max normalisation of depth (DFASR); LR by its HR frame's range
     color_max: float | None = None  # clip HDR colour to [0, color_max] at load (the authors used 10)
     sanitize: bool = False  # replace non-finite values by 0 and count them, instead of failing
     spatial_thresholds: dict = field(default_factory=lambda: {"depth": 0.01, "normal": 0.9, "albedo": 0.1})
@@ -120,15 +120,27 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
     return need
 
 
-def _clean(buffers: dict[str, np.ndarray], prep: Preprocessing) -> dict[str, Tensor]:
+def _far(depth: Tensor, prep: Preprocessing) -> Tensor:
+    return depth if prep.depth_far is None else torch.where(depth > prep.depth_far, torch.zeros_like(depth), depth)
+
+
+def _depth_range(depth: np.ndarray, prep: Preprocessing) -> tuple[Tensor, Tensor]:
+    """The min-max normalisation range of one frame's depth (after the far clamp)."""
+    t = _far(torch.from_numpy(depth), prep)
+    return t.min(), t.max()
+
+
+def _clean(
+    buffers: dict[str, np.ndarray], prep: Preprocessing, depth_range: tuple[Tensor, Tensor] | None = None
+) -> dict[str, Tensor]:
+    """Tensors of one frame's buffers; depth is normalised by ``depth_range`` (default: its own min and max)."""
     out = {}
     for name, value in buffers.items():
         t = torch.from_numpy(value)
         if name == "depth":
-            if prep.depth_far is not None:
-                t = torch.where(t > prep.depth_far, torch.zeros_like(t), t)
+            t = _far(t, prep)
             if prep.depth_normalize:
-                lo, hi = t.min(), t.max()
+                lo, hi = depth_range if depth_range is not None else (t.min(), t.max())
                 t = (t - lo) / (1e-6 + torch.clamp(hi, min=1.0) - lo)
         elif name == "normal":
             t = normalize_normals(t[None])[0]
@@ -211,32 +223,44 @@ class FrameDataset(Dataset):
                 return height
         return None
 
-    def _read(self, seq: Sequence, frame: int, height: int, buffers: set[str]) -> dict[str, Tensor]:
-        return _clean(seq.read(frame, height, sorted(buffers), sanitize=self.prep.sanitize), self.prep)
-
     def _frame(self, seq: Sequence, frame: int, lr_height: int | None) -> dict:
         """The uncropped buffers of one frame in each role (zeros for history before the first frame)."""
         need = self.need
+        # Native LR depth is normalised with the range of its HR frame, as point-sampled LR depth (cut from the
+        # cleaned HR frame) is: the spatial mask compares HR depth with LR depth, and both paths must agree. So
+        # the HR depth is read (and dropped after) where only the LR depth is needed.
+        hr_of = {"lr": "hr", "prev_lr": "prev"}
+        ranged = bool(lr_height) and self.prep.depth_normalize
+        extra = {hr: {"depth"} - need[hr] for lr, hr in hr_of.items() if ranged and "depth" in need[lr]}
         # Without a native low-resolution folder, LR roles are point-sampled from their HR frame in Collate.
         reads = {
-            "hr": (frame, seq.hr, need["hr"] | (set() if lr_height else need["lr"])),
+            "hr": (frame, seq.hr, need["hr"] | (set() if lr_height else need["lr"]) | extra.get("hr", set())),
             "lr": (frame, lr_height, need["lr"] if lr_height else set()),
-            "prev": (frame - 1, seq.hr, need["prev"] | (set() if lr_height else need["prev_lr"])),
+            "prev": (
+                frame - 1,
+                seq.hr,
+                need["prev"] | (set() if lr_height else need["prev_lr"]) | extra.get("prev", set()),
+            ),
             "prev_lr": (frame - 1, lr_height, need["prev_lr"] if lr_height else set()),
             "prev2": (frame - 2, seq.hr, need["prev2"]),
         }
         available = set(seq.frames)
         out: dict = {"sequence": seq.name, "frame": frame}
         shapes: dict[int | None, tuple[int, int]] = {}
+        ranges: dict[str, tuple[Tensor, Tensor]] = {}  # HR role -> its depth range, for the native LR role
         for role, (number, height, buffers) in reads.items():
             if not buffers:
                 out[role] = {}
             elif number in available:
-                out[role] = self._read(seq, number, height, buffers)
-                shapes.setdefault(height, next(iter(out[role].values())).shape[-2:])
+                raw = seq.read(number, height, sorted(buffers), sanitize=self.prep.sanitize)
+                if ranged and role in hr_of.values() and "depth" in raw:
+                    ranges[role] = _depth_range(raw["depth"], self.prep)
+                clean = _clean(raw, self.prep, ranges.get(hr_of[role]) if role in hr_of else None)
+                out[role] = {k: v for k, v in clean.items() if k not in extra.get(role, ())}
+                shapes.setdefault(height, next(iter(raw.values())).shape[-2:])
             else:  # history before the first frame, kept with zeros (first_frame="zeros")
                 shape = shapes.get(height) or self._shape(seq, height)
-                out[role] = {b: torch.zeros(BUFFERS[b], *shape) for b in buffers}
+                out[role] = {b: torch.zeros(BUFFERS[b], *shape) for b in buffers - extra.get(role, set())}
         if lr_height and seq.hr in shapes and lr_height in shapes:
             hr_shape, lr_shape = shapes[seq.hr], shapes[lr_height]
             expected = lr_size(*hr_shape, float(self.scale))
