@@ -18,7 +18,6 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 from wdss.data.exr import write_exr
-from wdss.data.tonemap import tonemap
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
 from wdss.tracking import RUN_ID_FILE
@@ -29,9 +28,8 @@ __all__ = ["WritePredictions", "evaluate", "main"]
 class WritePredictions(L.Callback):
     """Write each test prediction as ``<scene>_<frame>_<scale>x.exr`` (linear) and ``.png`` (tone-mapped)."""
 
-    def __init__(self, out_dir: str | Path, tonemap_name: str = "hable") -> None:
+    def __init__(self, out_dir: str | Path) -> None:
         self.out_dir = Path(out_dir)
-        self.tonemap_name = tonemap_name
 
     def on_test_batch_end(
         self, trainer, pl_module, outputs: Any, batch: Any, batch_idx: int, dataloader_idx: int = 0
@@ -45,7 +43,9 @@ class WritePredictions(L.Callback):
         for index, color in enumerate(outputs["color"].detach().float().cpu()):
             stem = f"{batch['sequence'][index]}_{int(batch['frame'][index]):04d}_{scale}"
             write_exr(self.out_dir / f"{stem}.exr", dict(zip("RGB", color.numpy(), strict=True)))
-            ldr = tonemap(color[None], self.tonemap_name)[0].permute(1, 2, 0).numpy()
+            # The module's display transform (its exposure, "auto" from the target): the PNG shows what the metric saw.
+            ldr = pl_module.tone(color[None], batch["target"][index : index + 1].float().cpu())[0]
+            ldr = ldr.permute(1, 2, 0).numpy()
             Image.fromarray((ldr * 255).round().astype(np.uint8)).save(self.out_dir / f"{stem}.png")
 
 
@@ -65,7 +65,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     logger = instantiate(cfg.logger, run_id=run_id, run_name=None if run_id else f"eval {ckpt.name}")
     callbacks = []
     if cfg.get("write_outputs"):
-        callbacks.append(WritePredictions(Path(str(cfg.paths.output_dir)) / "frames", module.hparams.tonemap_name))
+        callbacks.append(WritePredictions(Path(str(cfg.paths.output_dir)) / "frames"))
     trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks, enable_checkpointing=False)
     trainer.test(module, datamodule=datamodule)
     metrics = {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")}

@@ -75,6 +75,17 @@ def validate(cfg: DictConfig) -> None:
     for value in OmegaConf.to_container(cfg.data, resolve=True).get("test_scales", []):
         if not 1.0 <= float(value) <= 8.0:
             raise ConfigError(f"data.test_scales must lie in [1, 8], got {value}")
+    space, wavelet_weight = (
+        OmegaConf.select(cfg, "loss.space"),
+        OmegaConf.select(cfg, "loss.weights.wavelet", default=0),
+    )
+    output_space = OmegaConf.select(cfg, "model.net.output_space", default="linear")
+    if not baseline and transform != "none" and space != "linear" and wavelet_weight and output_space == "linear":
+        raise ConfigError(
+            f"loss.space={space} compares images in {space} space, but the wavelet term would compare linear "
+            "subbands (LL up to ~100x the image terms): set model.net.output_space=log (the head then predicts "
+            "log1p-irradiance subbands) or loss.weights.wavelet=0"
+        )
     temporal = OmegaConf.select(cfg, "temporal.name")
     if temporal != "recurrent" and OmegaConf.select(cfg, "loss.weights.temporal", default=0):
         raise ConfigError("loss.weights.temporal > 0 needs temporal=recurrent (consecutive outputs of the model)")
@@ -137,7 +148,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     output_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path, resume_run = _resume(cfg)
 
-    module = instantiate(cfg.model)
+    module = instantiate(cfg.model, tonemap_exposure=cfg.get("tonemap_exposure"))
     fitting = module.trainable and cfg.get("fit", True)
     if getattr(module.net, "needs_training", False) and not fitting and cfg.get("test"):
         raise ConfigError(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
 from tests.model.helpers import TINY, batch, losses_over_steps
@@ -207,23 +208,29 @@ def test_recurrent_training_feeds_back_its_own_warped_output():
     model.net.forward = spy
     loss = model.training_step({"steps": steps}, 0)
     assert torch.isfinite(loss) and loss.requires_grad
-    assert seen[0].abs().sum() == 0 and seen[1].abs().sum() > 0  # step 2 sees step 1's output (zero motion)
+    # A sequence starts from the upsampled LR irradiance (as DFASR does); step 2 sees step 1's output (zero motion).
+    start = F.interpolate(steps[0]["lr"], size=(16, 16), mode="bilinear", align_corners=False)
+    torch.testing.assert_close(seen[0], start)
+    assert not torch.allclose(seen[1], F.interpolate(steps[1]["lr"], size=(16, 16), mode="bilinear"))
     loss.backward()
     assert model.net.temporal_branch.layers[0].feature.weight.grad.abs().sum() > 0
 
 
 def test_recurrent_evaluation_carries_state_only_between_consecutive_frames():
     model = module("dwt", "haar", temporal=True, temporal_mode="recurrent", flip=None)
-    seen = []
+    seen, fresh = [], []
     forward = model.net.forward
-    model.net.forward = lambda **kw: (seen.append(float(kw["history"].abs().sum())), forward(**kw))[1]
+    model.net.forward = lambda **kw: (seen.append(kw["history"].clone()), forward(**kw))[1]
     for sequence, frame in (("a", 1), ("a", 2), ("a", 4), ("b", 5)):
         data = batch(n=1, size=(16, 16))
         data["motion"] = torch.zeros(1, 2, 16, 16)
         data["sequence"], data["frame"] = [sequence], torch.tensor([frame])
+        fresh.append(F.interpolate(data["lr"], size=(16, 16), mode="bilinear", align_corners=False))
         with torch.no_grad():
             model._evaluate(data, "val", "")
-    assert seen[0] == 0 and seen[1] > 0 and seen[2] == 0 and seen[3] == 0
+    # A new sequence (or a gap) starts from the upsampled LR; frame 2 follows frame 1 and sees its output.
+    starts = [torch.allclose(history, start) for history, start in zip(seen, fresh, strict=True)]
+    assert starts == [True, False, True, True]
 
 
 def test_temporal_settings_must_agree():

@@ -1,7 +1,9 @@
-"""Training losses, each term weighted by config, on remodulated linear HDR colour (REFERENCE.md section 6).
+"""Training losses, each term weighted by config, on remodulated colour (REFERENCE.md section 6).
 
-The image terms compare linear HDR colour by default, or ``log1p`` of it (``space="log"``).
-Terms: ``wavelet`` (L1 between predicted coefficients and the analysis of the target irradiance),
+The image terms compare colour in one space: ``linear`` HDR (the paper), ``log`` (``log1p``, DFASR), or
+``tonemapped`` (the metric's display transform, so the loss weighs errors as PSNR/SSIM/FLIP will).
+Terms: ``wavelet`` (L1 between predicted coefficients and the analysis of the target irradiance, in the space
+the network's head predicts in: see ``WDSSNet.target_coefficients``),
 ``l1``, ``ssim`` (1 - SSIM), ``masked_l1`` (L1 inside the spatial mask), ``temporal`` (the change between
 consecutive outputs against the change between consecutive targets, both previous frames warped; it needs
 the previous prediction and does not collapse to plain L1), ``lpips`` (only with local backbone weights).
@@ -16,11 +18,12 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 from torchmetrics.functional.image import structural_similarity_index_measure
 
-from wdss.wavelets import WaveletTransform
+from wdss.data.tonemap import ToneMap
 
-__all__ = ["LOSS_TERMS", "WDSSLoss", "temporal_difference_loss"]
+__all__ = ["LOSS_SPACES", "LOSS_TERMS", "WDSSLoss", "temporal_difference_loss"]
 
 LOSS_TERMS = ("wavelet", "l1", "ssim", "masked_l1", "temporal", "lpips")
+LOSS_SPACES = ("linear", "log", "tonemapped")
 
 
 def temporal_difference_loss(output: Tensor, warped_output_prev: Tensor, target: Tensor, warped_target_prev: Tensor):
@@ -31,11 +34,18 @@ def temporal_difference_loss(output: Tensor, warped_output_prev: Tensor, target:
 class WDSSLoss(nn.Module):
     """Weighted sum of the loss terms; ``weights`` maps term names to weights (0 or absent: off)."""
 
-    def __init__(self, weights: Mapping[str, float], lpips: nn.Module | None = None, space: str = "linear") -> None:
+    def __init__(
+        self,
+        weights: Mapping[str, float],
+        lpips: nn.Module | None = None,
+        space: str = "linear",
+        tone: ToneMap | None = None,
+    ) -> None:
         super().__init__()
-        if space not in ("linear", "log"):
-            raise ValueError(f"loss.space must be 'linear' or 'log', got {space!r}")
+        if space not in LOSS_SPACES:
+            raise ValueError(f"loss.space must be one of {', '.join(LOSS_SPACES)}, got {space!r}")
         self.space = space
+        self.tone = tone or ToneMap()
         unknown = set(weights) - set(LOSS_TERMS)
         if unknown:
             raise ValueError(f"unknown loss terms {sorted(unknown)}: expected some of {', '.join(LOSS_TERMS)}")
@@ -53,38 +63,39 @@ class WDSSLoss(nn.Module):
         target: Tensor,
         *,
         coefficients: Tensor | None = None,
-        target_irradiance: Tensor | None = None,
-        wavelet: WaveletTransform | None = None,
+        target_coefficients: Tensor | None = None,
         spatial_mask: Tensor | None = None,
         temporal: tuple[Tensor, Tensor] | None = None,
     ) -> dict[str, Tensor]:
         """The terms and their weighted ``total``. ``output``/``target``: remodulated linear HDR colour.
 
-        With ``space="log"`` the image terms compare ``log1p`` of the colours (DFASR's choice: highlights no
-        longer dominate); the wavelet term always compares linear irradiance coefficients.
+        ``coefficients``/``target_coefficients``: the predicted subbands and the analysis of the target in the
+        same space (the network's :meth:`~wdss.model.network.WDSSNet.target_coefficients`); the image terms
+        compare ``output`` and ``target`` after mapping both into ``space``.
         """
         terms: dict[str, Tensor] = {}
         output, target = output.float(), target.float()  # losses in float32, also under mixed precision
-        if self.space == "log":
-            output, target = torch.log1p(output.clamp_min(0)), torch.log1p(target.clamp_min(0))
-            if temporal is not None:
-                temporal = (torch.log1p(temporal[0].clamp_min(0)), torch.log1p(temporal[1].clamp_min(0)))
+        reference = target
+        output, target = self.to_space(output, reference), self.to_space(target, reference)
+        if temporal is not None:
+            temporal = (self.to_space(temporal[0], reference), self.to_space(temporal[1], reference))
         w = self.weights
         if "l1" in w:
             terms["l1"] = F.l1_loss(output, target)
         if "ssim" in w:
+            # SSIM's constants assume a known data range: 1 for display values, the target's range otherwise.
+            data_range = 1.0 if self.space == "tonemapped" else float(target.detach().amax().clamp_min(1.0))
             ssim = structural_similarity_index_measure(
-                output, target, data_range=1.0, gaussian_kernel=True, sigma=1.5, kernel_size=11
+                output, target, data_range=data_range, gaussian_kernel=True, sigma=1.5, kernel_size=11
             )
             terms["ssim"] = 1.0 - ssim
         if "masked_l1" in w and spatial_mask is not None:
-            terms["masked_l1"] = ((output - target).abs() * spatial_mask).mean()
-        if "wavelet" in w and coefficients is not None and wavelet is not None and wavelet.transform != "none":
-            reference = target_irradiance
-            if wavelet.transform == "dwt":  # the network pads odd frames to even before its DWT head
-                h, wd = reference.shape[-2:]
-                reference = F.pad(reference, (0, wd % 2, 0, h % 2), mode="replicate")
-            terms["wavelet"] = F.l1_loss(coefficients, wavelet.analysis(reference))
+            # A mean over the masked pixels (all channels), not over the frame: the term's weight does not
+            # shrink with the share of edges in the patch.
+            inside = spatial_mask.expand_as(output)
+            terms["masked_l1"] = ((output - target).abs() * inside).sum() / inside.sum().clamp_min(1.0)
+        if "wavelet" in w and coefficients is not None and target_coefficients is not None:
+            terms["wavelet"] = F.l1_loss(coefficients.float(), target_coefficients.float())
         if "temporal" in w and temporal is not None:
             warped_output_prev, warped_target_prev = temporal
             terms["temporal"] = temporal_difference_loss(output, warped_output_prev, target, warped_target_prev)
@@ -93,3 +104,11 @@ class WDSSLoss(nn.Module):
         total = sum(w[name] * value for name, value in terms.items())
         terms["total"] = total if isinstance(total, Tensor) else torch.zeros((), device=output.device)
         return terms
+
+    def to_space(self, color: Tensor, reference: Tensor) -> Tensor:
+        """Linear colour mapped into the loss space (``reference``: the target, for an ``auto`` exposure)."""
+        if self.space == "log":
+            return torch.log1p(color.clamp_min(0))
+        if self.space == "tonemapped":
+            return self.tone(color, reference)
+        return color

@@ -16,7 +16,7 @@ import torch
 from torch import Tensor, nn
 from torchmetrics.functional.image import structural_similarity_index_measure
 
-from wdss.data.tonemap import tonemap
+from wdss.data.tonemap import ToneMap
 
 __all__ = ["LPIPS", "ImageMetrics", "flip_error", "psnr", "ssim"]
 
@@ -52,15 +52,22 @@ def flip_error(output: Tensor, target: Tensor, dynamic_range: str) -> Tensor:
 class ImageMetrics(nn.Module):
     """Per-image metrics of remodulated linear colour, after tone mapping with ``tonemap_name``."""
 
-    def __init__(self, tonemap_name: str = "hable", flip: bool = True, lpips: nn.Module | None = None):
+    def __init__(
+        self,
+        tonemap_name: str = "hable",
+        flip: bool = True,
+        lpips: nn.Module | None = None,
+        exposure: float | str | None = None,
+    ):
         super().__init__()
         self.tonemap_name = tonemap_name
+        self.tone = ToneMap(tonemap_name, exposure)
         self.flip = flip
         self.lpips = lpips
 
     @torch.no_grad()
     def forward(self, output: Tensor, target: Tensor) -> dict[str, Tensor]:
-        values = self._ldr(tonemap(output, self.tonemap_name), tonemap(target, self.tonemap_name))
+        values = self._ldr(self.tone(output, target), self.tone(target, target))
         if self.flip:
             values["flip_hdr"] = flip_error(output, target, "HDR")
         return {k: v.detach().cpu() for k, v in values.items()}
@@ -68,7 +75,7 @@ class ImageMetrics(nn.Module):
     @torch.no_grad()
     def display(self, output_ldr: Tensor, target: Tensor) -> dict[str, Tensor]:
         """Metrics of a model that outputs display images (no HDR FLIP: it has no linear output)."""
-        values = self._ldr(output_ldr, tonemap(target, self.tonemap_name))
+        values = self._ldr(output_ldr, self.tone(target, target))
         return {k: v.detach().cpu() for k, v in values.items()}
 
     def _ldr(self, out_ldr: Tensor, ref_ldr: Tensor) -> dict[str, Tensor]:

@@ -17,7 +17,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from torch import Tensor, nn
 
-from wdss.data.tonemap import tonemap
+from wdss.data.tonemap import ToneMap
 from wdss.data.warp import warp_backward
 from wdss.model.losses import WDSSLoss
 from wdss.model.metrics import LPIPS, ImageMetrics
@@ -53,6 +53,7 @@ class SuperResolutionModule(L.LightningModule):
         temporal: str | None = None,
         detach_history: bool = False,
         loss_space: str = "linear",
+        tonemap_exposure: float | str | None = None,
     ) -> None:
         super().__init__()
         # Plain containers only: checkpoints then load with weights_only=True and rebuild the network.
@@ -68,6 +69,7 @@ class SuperResolutionModule(L.LightningModule):
             "temporal": temporal,
             "detach_history": detach_history,
             "loss_space": loss_space,
+            "tonemap_exposure": tonemap_exposure,
         }
         if isinstance(net, nn.Module):
             self.net = net
@@ -79,8 +81,9 @@ class SuperResolutionModule(L.LightningModule):
             hparams["temporal"] = temporal
         self.save_hyperparameters(hparams)
         lpips_model = LPIPS(lpips["backbone"], lpips["linear"]) if lpips else None
-        self.criterion = WDSSLoss(hparams["loss_weights"], lpips=lpips_model, space=loss_space)
-        self.metrics = ImageMetrics(tonemap_name, flip=flip, lpips=lpips_model)
+        self.tone = ToneMap(tonemap_name, tonemap_exposure)  # metrics, pictures and a tone-mapped loss alike
+        self.criterion = WDSSLoss(hparams["loss_weights"], lpips=lpips_model, space=loss_space, tone=self.tone)
+        self.metrics = ImageMetrics(tonemap_name, flip=flip, lpips=lpips_model, exposure=tonemap_exposure)
         self.optimizer_config = hparams["optimizer"]
         self.scheduler_config = hparams["scheduler"]
         self.trainable = trainable and any(p.requires_grad for p in self.net.parameters())
@@ -129,23 +132,29 @@ class SuperResolutionModule(L.LightningModule):
         self, batch: Mapping[str, Any], out: Mapping[str, Tensor | None], temporal: tuple[Tensor, Tensor] | None = None
     ) -> dict[str, Tensor]:
         if out.get("display") is not None:  # display-space models learn the tone-mapped target
-            target = tonemap(batch["target"], self.hparams.tonemap_name)
+            target = self.tone(batch["target"], batch["target"])
             return self.criterion(out["display"], target, spatial_mask=batch.get("spatial_mask"))
+        target_coefficients = None
+        if out.get("coefficients") is not None and self.criterion.weights.get("wavelet"):
+            target_coefficients = self.net.target_coefficients(batch["target"] / batch["brdf"])
         return self.criterion(
             out["color"],
             batch["target"],
             coefficients=out["coefficients"],
-            target_irradiance=batch["target"] / batch["brdf"],
-            wavelet=getattr(self.net, "wavelet", None),
+            target_coefficients=target_coefficients,
             spatial_mask=batch.get("spatial_mask"),
             temporal=temporal,
         )
 
     def _with_history(self, batch: Mapping[str, Any], previous: Tensor | None) -> dict[str, Any]:
-        """The batch with ``history`` = the previous output warped by the motion vectors (zeros at the start)."""
+        """The batch with ``history`` = the previous output warped by the motion vectors; at the start of a
+        sequence, the LR irradiance upsampled bilinearly (as DFASR starts), not zeros."""
         step = dict(batch)
         if previous is None:
-            step["history"] = torch.zeros_like(batch["target"])
+            size = batch["target"].shape[-2:]
+            step["history"] = torch.nn.functional.interpolate(
+                batch["lr"], size=size, mode="bilinear", align_corners=False
+            )
         else:
             step["history"] = warp_backward(
                 previous.detach() if self.hparams.detach_history else previous, batch["motion"]
@@ -236,11 +245,10 @@ class SuperResolutionModule(L.LightningModule):
         label = f"{float(batch['scale'][0]):g}x"
         out = self._evaluate(batch, "test", f"_{label}")  # MLflow forbids '@' in metric names
         if batch_idx == 0:  # the first test frame of every scale, for the report's qualitative figure
-            shown = (
-                out["display"] if out.get("display") is not None else tonemap(out["color"], self.hparams.tonemap_name)
-            )
+            target = batch["target"][:1].float()
+            shown = out["display"] if out.get("display") is not None else self.tone(out["color"][:1].float(), target)
             self._log_frame(shown[:1].float(), f"test/pred_{label}.png")
-            self._log_frame(tonemap(batch["target"][:1].float(), self.hparams.tonemap_name), f"test/target_{label}.png")
+            self._log_frame(self.tone(target, target), f"test/target_{label}.png")
         return {"color": out["color"].detach()} if out.get("color") is not None else {}
 
     def _log_frame(self, image: Tensor, artifact_file: str) -> None:
@@ -256,7 +264,7 @@ class SuperResolutionModule(L.LightningModule):
         run_id = getattr(self.logger, "run_id", None)
         if experiment is None or run_id is None or not hasattr(experiment, "log_image"):
             return
-        panel = comparison_panel(batch, out, self.hparams.tonemap_name)
+        panel = comparison_panel(batch, out, self.tone)
         experiment.log_image(run_id, panel, artifact_file=f"images/val_epoch{self.current_epoch:03d}.png")
         coefficients = out.get("coefficients")
         if coefficients is not None:
@@ -278,13 +286,14 @@ class SuperResolutionModule(L.LightningModule):
         return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
 
 
-def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None], tonemap_name: str):
+def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None], tone: ToneMap):
     """LR (nearest-upsampled) | prediction | target | error x4, tone-mapped, as an (H, 4W, 3) uint8 array."""
     import numpy as np
 
-    target = tonemap(batch["target"][:1].float(), tonemap_name)
+    reference = batch["target"][:1].float()
+    target = tone(reference, reference)
     shown = out.get("display")
-    pred = shown[:1].detach().float() if shown is not None else tonemap(out["color"][:1].detach().float(), tonemap_name)
+    pred = shown[:1].detach().float() if shown is not None else tone(out["color"][:1].detach().float(), reference)
     lr_source = batch.get("lr_color")
     if lr_source is None and "lr" in batch:
         lr_brdf = torch.nn.functional.interpolate(batch["brdf"][:1], size=batch["lr"].shape[-2:], mode="nearest")
@@ -292,8 +301,8 @@ def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None],
     lr = (
         torch.zeros_like(target)
         if lr_source is None
-        else tonemap(
-            torch.nn.functional.interpolate(lr_source[:1].float(), size=target.shape[-2:], mode="nearest"), tonemap_name
+        else tone(
+            torch.nn.functional.interpolate(lr_source[:1].float(), size=target.shape[-2:], mode="nearest"), reference
         )
     )
     error = ((pred - target).abs() * 4).clamp(0, 1)

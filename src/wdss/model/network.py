@@ -25,9 +25,13 @@ from torch import Tensor, nn
 from wdss.model.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3
 from wdss.wavelets import WaveletTransform
 
-__all__ = ["HEADS", "WIDTHS", "WDSSNet"]
+__all__ = ["HEADS", "OUTPUT_SPACES", "RESIDUALS", "WIDTHS", "WDSSNet"]
 
 HEADS = ("shared_inr", "multi_inr", "fusion_ll")
+# What the head's coefficients (or image, for transform=none) represent: irradiance (the paper) or log1p of it.
+OUTPUT_SPACES = ("linear", "log")
+# What the head adds its prediction to: nothing (the paper), or the LR irradiance upsampled by a fixed method.
+RESIDUALS = ("none", "bilinear", "joint_bilateral")
 # Width presets besides the paper's defaults (conf/size/small.yaml mirrors "small"): "small" trains in minutes
 # on 2 CPU cores; "tiny" is for tests and stability checks.
 WIDTHS: dict[str, dict] = {
@@ -255,8 +259,15 @@ class WDSSNet(nn.Module):
         gbuffer_channels: Sequence[int] | None = None,
         fusion_final_relu: bool = False,
         phase_bias: bool = True,
+        output_space: str = "linear",
+        residual: str = "none",
     ) -> None:
         super().__init__()
+        if output_space not in OUTPUT_SPACES:
+            raise ValueError(f"model.output_space must be one of {', '.join(OUTPUT_SPACES)}, got {output_space!r}")
+        if residual not in RESIDUALS:
+            raise ValueError(f"model.residual must be one of {', '.join(RESIDUALS)}, got {residual!r}")
+        self.output_space, self.residual = output_space, residual
         if wavelet is not None:  # a configured transform module (conf/transform/*.yaml) names both
             if wavelet.level != 1:
                 raise ValueError(f"the network heads use one wavelet level, got level={wavelet.level}")
@@ -301,6 +312,9 @@ class WDSSNet(nn.Module):
         # Exit convolution: on RGB at H (none), on the DWT bands at H/2, on the SWT subbands at H.
         exit_channels = RGB if transform == "none" else self.coeff_channels
         self.exit = conv3x3(exit_channels, exit_channels)
+        if residual != "none":  # the network starts as its upsampler and learns only a correction of it
+            nn.init.zeros_(self.exit.weight)
+            nn.init.zeros_(self.exit.bias)
 
     @property
     def inputs(self) -> tuple[str, ...]:
@@ -328,6 +342,7 @@ class WDSSNet(nn.Module):
             lr_in = F.pixel_unshuffle(F.pad(self._to_input(lr), pad_lr, mode="replicate"), 2)
         else:
             lr_in = self._to_input(lr)
+        guide = gbuffer  # the whole stack: a joint-bilateral residual base reads depth, normal and albedo
         if self.gbuffer_channels is not None:
             gbuffer = gbuffer[:, self.gbuffer_channels]
         gb_in = F.pixel_unshuffle(F.pad(torch.cat([gbuffer, spatial_mask], 1), pad_hr, mode="replicate"), 2)
@@ -342,16 +357,53 @@ class WDSSNet(nn.Module):
         fusion = self.fusion(torch.cat(parts, 1))
         inr = self.inr(lr_inr, gb_inr, scale, (height, width), lr.shape[-2:], lr_cell)
         merged = torch.cat([fusion, inr], 1) if self.head == "fusion_ll" else fusion + inr
+        base = self._residual_base(lr, guide, pad_hr)
         coefficients: Tensor | None
         if self.transform == "none":
             image = self.exit(F.pixel_shuffle(merged, 2)).float()
+            if base is not None:
+                image = image + base
             coefficients = None
         else:
             coefficients = self.exit(merged if self.transform == "dwt" else F.pixel_shuffle(merged, 2)).float()
             # The synthesis stays float32 under mixed precision: it sums large subbands that nearly cancel.
             with torch.autocast(coefficients.device.type, enabled=False):
+                if base is not None:  # the residual lives in the coefficient domain: the wavelet loss sees it whole
+                    coefficients = coefficients + self.wavelet.analysis(base)
                 image = self.wavelet(coefficients)  # forward() is the synthesis; a submodule for FLOP counts
         image = image[..., :height, :width]
         if coefficients is not None and self.transform == "swt":
             coefficients = coefficients[..., :height, :width]
-        return {"irradiance": image.clamp_min(0.0), "coefficients": coefficients}
+        return {"irradiance": self._from_space(image), "coefficients": coefficients}
+
+    # ------------------------------------------------------------------------------------------ output space
+
+    def _to_space(self, irradiance: Tensor) -> Tensor:
+        return torch.log1p(irradiance.float().clamp_min(0)) if self.output_space == "log" else irradiance.float()
+
+    def _from_space(self, image: Tensor) -> Tensor:
+        if self.output_space == "log":  # 20 = log1p(4.9e8): far above any radiance, far below float32 overflow
+            return torch.expm1(image.clamp(0.0, 20.0))
+        return image.clamp_min(0.0)
+
+    def _residual_base(self, lr: Tensor, gbuffer: Tensor, pad: tuple[int, int, int, int]) -> Tensor | None:
+        """The upsampled LR irradiance the head adds to, in the output space, padded like the HR/2 grid."""
+        if self.residual == "none":
+            return None
+        if self.residual == "bilinear":
+            up = F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
+        else:
+            from wdss.model.joint_bilateral import joint_bilateral_upsample
+
+            up = joint_bilateral_upsample(lr.float(), gbuffer.float())
+        return F.pad(self._to_space(up), pad, mode="replicate")
+
+    def target_coefficients(self, irradiance: Tensor) -> Tensor | None:
+        """The analysis of a target irradiance ``(N, 3, H, W)`` in the space and layout of the predicted
+        coefficients (padded to even and cropped back as the head does), for the wavelet loss term."""
+        if self.transform == "none":
+            return None
+        height, width = irradiance.shape[-2:]
+        padded = F.pad(self._to_space(irradiance), (0, width % 2, 0, height % 2), mode="replicate")
+        coefficients = self.wavelet.analysis(padded)
+        return coefficients[..., :height, :width] if self.transform == "swt" else coefficients

@@ -28,6 +28,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from wdss.data.exr import write_exr
 from wdss.data.layouts import UnrealLayout
 from wdss.data.sampling import lr_size, point_sample
+from wdss.render.exposure import auto_exposure
 from wdss.render.spec import SceneSpec, camera_pose, intrinsics, random_scene
 
 __all__ = ["frame_files", "preset_settings", "render_preset", "render_sequence", "render_sequences"]
@@ -86,12 +87,15 @@ def render_sequence(
     objects: tuple[int, int] = (10, 40),
     compression: str = "zip",
     half: bool = True,
+    exposure: float | str = "auto",
     progress: Progress | None = None,
     spec: SceneSpec | None = None,
 ) -> Path:
     """Render one sequence into ``out_dir/name`` and return that folder. ``resolution`` is (width, height).
 
-    The scene is ``random_scene(seed)`` unless a ``spec`` is given.
+    The scene is ``random_scene(seed)`` unless a ``spec`` is given. ``exposure``: the factor every frame's
+    radiance is multiplied by, or ``"auto"``: chosen from frame 0 by :func:`wdss.render.exposure.auto_exposure`
+    and recorded in ``sequence.json`` (so a resumed render applies the same factor).
     """
     from wdss.render.convert import to_buffers
 
@@ -99,6 +103,8 @@ def render_sequence(
         raise ValueError(f"render.lr_mode must be 'downsample' or 'native', got {lr_mode!r}")
     width, height = resolution
     scales = [int(s) for s in scales]
+    if exposure != "auto" and not (isinstance(exposure, (int, float)) and exposure > 0):
+        raise ValueError(f"render.exposure must be 'auto' or a positive number, got {exposure!r}")
     for s in scales:
         if width % s or height % s:
             raise ValueError(f"render.resolution {width}x{height} is not divisible by scale {s}")
@@ -118,6 +124,7 @@ def render_sequence(
         "filter_width": filter_width,
         "compression": compression,
         "half": half,
+        "exposure": exposure,
         "blender": "bpy 5.0.1, Cycles CPU",
     }
     sidecar = folder / "sequence.json"
@@ -145,6 +152,8 @@ def render_sequence(
         "scene": spec.to_dict(),
         "frames": [{"frame": f, "camera_to_world": camera_pose(spec.camera, f).tolist()} for f in range(frames + 1)],
         "render_seconds": (previous_meta or {}).get("render_seconds", {}),
+        # The pre-exposure applied to the radiance of every frame (None until frame 0 has been rendered).
+        "exposure": exposure if exposure != "auto" else (previous_meta or {}).get("exposure"),
     }
     _write_json(sidecar, meta)
     for stale in folder.rglob(".*.tmp"):  # a render killed while writing leaves only its temporary file
@@ -161,6 +170,10 @@ def render_sequence(
         camera = camera_pose(spec.camera, frame)
         previous = camera_pose(spec.camera, frame - 1)
         hr = to_buffers(scene.render(frame, width, height), camera=camera, previous_camera=previous, lens=lens)
+        if meta["exposure"] is None:  # recorded before any file is written: a resumed render applies the same
+            meta["exposure"] = auto_exposure(hr["color"])
+            _write_json(sidecar, meta)
+        hr["color"] = hr["color"] * np.float32(meta["exposure"])
         write_unreal_frame(folder / f"{height}P", frame, hr, compression, half)
         for s in scales:
             size = lr_size(height, width, s)
@@ -169,6 +182,7 @@ def render_sequence(
             else:
                 passes = scene.render(frame, size[1], size[0], samples=lr_samples)
                 lr = to_buffers(passes, camera=camera, previous_camera=previous, lens=lens, motion_scale=float(s))
+                lr["color"] = lr["color"] * np.float32(meta["exposure"])
             write_unreal_frame(folder / f"{size[0]}P", frame, lr, compression, half)
         meta["render_seconds"][str(frame)] = round(time.perf_counter() - start, 3)
         _write_json(sidecar, meta)

@@ -1,0 +1,43 @@
+"""Pre-exposure of rendered radiance: one factor per sequence, as an engine's pre-exposure does.
+
+Cycles writes radiance in scene units; what those units look like depends on the HDRI, the sun and the
+emitters, and on ``data/mini`` the metric's tone map (Hable, exposure 10, white 11.2: it reaches 1.0 at linear
+1.12) saw 8-72 % saturated values. The renderer therefore scales every frame of a sequence by one factor,
+chosen from the first frame, so that its median luminance is that of real engine frames (DFASR's Unreal
+sample: pre-tonemap median 0.19, tone-mapped median 0.47, 0.1 % saturated) -- unless that would saturate
+more than a small share of the frame, in which case the bright end decides. The factor is recorded in
+``sequence.json`` (``exposure``) and applied to every frame and every resolution alike, so motion, history
+and demodulation stay consistent.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["MIDDLE_GREY", "SATURATION", "SATURATED_SHARE", "auto_exposure", "luminance"]
+
+MIDDLE_GREY = 0.18  # the median luminance aimed at (Hable at exposure 10 maps it to 0.46)
+SATURATION = 1.0  # linear value near which the metric's tone curve saturates (0.974 at 1.0; 1.0 at 1.12)
+SATURATED_SHARE = 0.01  # at most this share of colour values may lie above SATURATION after exposure
+
+
+def luminance(color: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance of ``(3, H, W)`` linear colour."""
+    return 0.2126 * color[0] + 0.7152 * color[1] + 0.0722 * color[2]
+
+
+def auto_exposure(color: np.ndarray, *, middle_grey: float = MIDDLE_GREY, saturated_share: float = SATURATED_SHARE):
+    """The factor that brings a frame's median luminance to ``middle_grey``, lowered when more than
+    ``saturated_share`` of its colour values would then exceed :data:`SATURATION`.
+
+    ``color``: ``(3, H, W)`` linear radiance (non-finite values are ignored). Returns a positive float.
+    """
+    color = np.nan_to_num(np.asarray(color, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0).clip(0.0, None)
+    median = float(np.median(luminance(color)))
+    if median <= 0.0:  # an all-black first frame: leave the radiance as rendered
+        return 1.0
+    exposure = middle_grey / median
+    bright = float(np.quantile(color, 1.0 - saturated_share))
+    if bright * exposure > SATURATION:
+        exposure = SATURATION / bright
+    return float(exposure)

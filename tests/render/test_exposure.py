@@ -1,0 +1,31 @@
+"""The renderer's per-sequence pre-exposure (wdss.render.exposure), against direct numpy computations."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wdss.render.exposure import MIDDLE_GREY, SATURATION, auto_exposure, luminance
+
+
+def test_median_luminance_goes_to_middle_grey():
+    rng = np.random.default_rng(0)
+    color = rng.uniform(0.5, 1.5, (3, 32, 48)) * 4.0  # an over-exposed frame without a bright tail
+    exposure = auto_exposure(color)
+    assert abs(np.median(luminance(color * exposure)) - MIDDLE_GREY) < 1e-9
+
+
+def test_a_bright_tail_lowers_the_exposure_until_at_most_one_percent_saturates():
+    rng = np.random.default_rng(1)
+    color = rng.uniform(0.5, 1.5, (3, 40, 50))
+    color[:, :8] = 200.0  # sky or emitters: 16 % of the frame
+    exposure = auto_exposure(color)
+    assert exposure < MIDDLE_GREY / np.median(luminance(color))
+    assert np.mean(color * exposure > SATURATION * (1 + 1e-9)) <= 0.01 + 1e-9
+
+
+def test_black_and_non_finite_frames():
+    assert auto_exposure(np.zeros((3, 4, 4))) == 1.0
+    color = np.full((3, 4, 4), 0.9)
+    color[0, 0, 0] = np.nan
+    color[1, 0, 0] = np.inf
+    assert np.isfinite(auto_exposure(color)) and auto_exposure(color) > 0
