@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wdss.render.exposure import MIDDLE_GREY, SATURATION, auto_exposure, luminance
+from wdss.render.exposure import MAX_DARKENING, MIDDLE_GREY, SATURATION, auto_exposure, luminance
 
 
 def test_median_luminance_goes_to_middle_grey():
@@ -17,10 +17,18 @@ def test_median_luminance_goes_to_middle_grey():
 def test_a_bright_tail_lowers_the_exposure_until_at_most_one_percent_saturates():
     rng = np.random.default_rng(1)
     color = rng.uniform(0.5, 1.5, (3, 40, 50))
-    color[:, :8] = 200.0  # sky or emitters: 16 % of the frame
+    color[:, :8] = 8.0  # sky or emitters: 16 % of the frame
     exposure = auto_exposure(color)
     assert exposure < MIDDLE_GREY / np.median(luminance(color))
     assert np.mean(color * exposure > SATURATION * (1 + 1e-9)) <= 0.01 + 1e-9
+
+
+def test_a_large_emitter_darkens_by_at_most_one_and_a_half_stops():
+    rng = np.random.default_rng(2)
+    color = rng.uniform(0.5, 1.5, (3, 40, 50))
+    color[:, :8] = 2000.0  # far too bright to keep: the rest of the frame would go black
+    grey = MIDDLE_GREY / np.median(luminance(color))
+    assert np.isclose(auto_exposure(color), MAX_DARKENING * grey)
 
 
 def test_black_and_non_finite_frames():

@@ -5,7 +5,7 @@ emitters, and on ``data/mini`` the metric's tone map (Hable, exposure 10, white 
 1.12) saw 8-72 % saturated values. The renderer therefore scales every frame of a sequence by one factor,
 chosen from the first frame, so that its median luminance is that of real engine frames (DFASR's Unreal
 sample: pre-tonemap median 0.19, tone-mapped median 0.47, 0.1 % saturated) -- unless that would saturate
-more than a small share of the frame, in which case the bright end decides. The factor is recorded in
+more than 1 % of the frame, in which case the bright end decides, within 1.5 stops. The factor is recorded in
 ``sequence.json`` (``exposure``) and applied to every frame and every resolution alike, so motion, history
 and demodulation stay consistent.
 """
@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MIDDLE_GREY", "SATURATION", "SATURATED_SHARE", "auto_exposure", "luminance"]
+__all__ = ["MAX_DARKENING", "MIDDLE_GREY", "SATURATION", "SATURATED_SHARE", "auto_exposure", "luminance"]
 
 MIDDLE_GREY = 0.18  # the median luminance aimed at (Hable at exposure 10 maps it to 0.46)
 SATURATION = 1.0  # linear value near which the metric's tone curve saturates (0.974 at 1.0; 1.0 at 1.12)
-SATURATED_SHARE = 0.01  # at most this share of colour values may lie above SATURATION after exposure
+SATURATED_SHARE = 0.01  # at most this share of colour values may lie above SATURATION after exposure...
+MAX_DARKENING = 0.35  # ...unless meeting that would darken the median below 0.35 x middle grey (1.5 stops)
 
 
 def luminance(color: np.ndarray) -> np.ndarray:
@@ -39,5 +40,7 @@ def auto_exposure(color: np.ndarray, *, middle_grey: float = MIDDLE_GREY, satura
     exposure = middle_grey / median
     bright = float(np.quantile(color, 1.0 - saturated_share))
     if bright * exposure > SATURATION:
-        exposure = SATURATION / bright
+        # The bright end may lower the exposure by at most MAX_DARKENING: beyond that a large emitter or the sun
+        # would leave the rest of the frame in the toe of the curve, where the metric sees nothing either.
+        exposure = max(SATURATION / bright, exposure * MAX_DARKENING)
     return float(exposure)
