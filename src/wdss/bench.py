@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m wdss.bench wavelets|data|model|stability``.
+"""Benchmarks: ``python -m wdss.bench wavelets|data|model|stability|render``.
 
 Every benchmark reports medians of repeated runs and ratios measured in the same process, never absolute
 targets: timing on shared machines is noisy, so comparisons are only made within one run.
@@ -204,6 +204,47 @@ def bench_stability() -> Table:
     return table
 
 
+def bench_render(
+    seeds: Sequence[int], frame: int, size: tuple[int, int], samples: Sequence[int], reference: int
+) -> Table:
+    """Render quality: colour at each sample count (+ OpenImageDenoise, as datasets are rendered) against a
+    ``reference``-sample render of the same frame, PSNR after the metric's tone map at the sequence's auto
+    exposure, and seconds per frame. Needs the ``render`` extra."""
+    import numpy as np
+
+    from wdss.data.tonemap import hable
+    from wdss.render.blender import BlenderScene
+    from wdss.render.exposure import auto_exposure
+    from wdss.render.spec import random_scene
+
+    width, height = size
+    table = Table(title=f"render: {width}x{height}, frame {frame}, against {reference} spp + OIDN")
+    for column in ("seed", "spp", "s/frame", "PSNR (dB)", "high-freq. energy / reference"):
+        table.add_column(column, justify="right")
+    for seed in seeds:
+        scene = BlenderScene(random_scene(seed), samples=reference, denoise=True, filter_width=0.01)
+        exposure = auto_exposure(scene.render(0, width, height, samples=8)["Combined"][:3])
+        start = time.perf_counter()
+        ref = torch.from_numpy(scene.render(frame, width, height)["Combined"][None, :3] * exposure)
+        ref_seconds = time.perf_counter() - start
+        ref_ldr = hable(ref)
+
+        def detail(x: torch.Tensor) -> float:  # energy of the Laplacian: texture a denoiser smears is lost here
+            lap = x[..., 1:-1, 1:-1] * 4 - x[..., :-2, 1:-1] - x[..., 2:, 1:-1] - x[..., 1:-1, :-2] - x[..., 1:-1, 2:]
+            return float((lap**2).mean())
+
+        for spp in samples:
+            start = time.perf_counter()
+            color = torch.from_numpy(scene.render(frame, width, height, samples=spp)["Combined"][None, :3] * exposure)
+            seconds = time.perf_counter() - start
+            mse = float(((hable(color) - ref_ldr) ** 2).mean())
+            psnr = -10 * np.log10(max(mse, 1e-12))
+            ratio = detail(hable(color)) / max(detail(ref_ldr), 1e-12)
+            table.add_row(str(seed), str(spp), f"{seconds:.1f}", f"{psnr:.2f}", f"{ratio:.3f}")
+        table.add_row(str(seed), f"{reference} (ref)", f"{ref_seconds:.1f}", "-", "1.000")
+    return table
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m wdss.bench", description=__doc__)
     sub = parser.add_subparsers(dest="what", required=True)
@@ -224,6 +265,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     model.add_argument("--widths", choices=("paper", "small"), default="paper")
     model.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     sub.add_parser("stability", help="stiff and extreme cases: worst relative error, finiteness")
+    ren = sub.add_parser("render", help="rendered colour at a few sample counts against a high-sample reference")
+    ren.add_argument("--seeds", type=int, nargs="+", default=[101, 200])  # training and validation scenes of mini
+    ren.add_argument("--frame", type=int, default=6)
+    ren.add_argument("--size", type=int, nargs=2, default=(384, 216), metavar=("W", "H"))
+    ren.add_argument("--samples", type=int, nargs="+", default=[8, 16, 32])
+    ren.add_argument("--reference", type=int, default=512)
     args = parser.parse_args(argv)
 
     console = Console()
@@ -233,6 +280,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         console.print(bench_data(tuple(args.size), args.frames, args.repeats, args.scale))
     elif args.what == "stability":
         console.print(bench_stability())
+    elif args.what == "render":
+        console.print(bench_render(args.seeds, args.frame, tuple(args.size), args.samples, args.reference))
     elif args.what == "model":
         console.print(bench_model(tuple(args.size), args.scale, args.repeats, args.device, args.widths))
 

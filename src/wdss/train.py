@@ -80,7 +80,8 @@ def validate(cfg: DictConfig) -> None:
         OmegaConf.select(cfg, "loss.weights.wavelet", default=0),
     )
     output_space = OmegaConf.select(cfg, "model.net.output_space", default="linear")
-    if not baseline and transform != "none" and space != "linear" and wavelet_weight and output_space == "linear":
+    head_transform = OmegaConf.select(cfg, "model.net.wavelet.transform", default=None)  # WDSS-family networks
+    if head_transform in ("dwt", "swt") and space != "linear" and wavelet_weight and output_space == "linear":
         raise ConfigError(
             f"loss.space={space} compares images in {space} space, but the wavelet term would compare linear "
             "subbands (LL up to ~100x the image terms): set model.net.output_space=log (the head then predicts "
@@ -230,7 +231,7 @@ def main(cfg: DictConfig) -> float | None:
     output_dir = cfg.paths.output_dir
     print(f"wdss.train: run {run_name(cfg)!r} done; outputs in {output_dir}")
     print(f"  MLflow: {OmegaConf.select(cfg, 'logger.tracking_uri')} -- browse with `make ui`")
-    for key in sorted(k for k in metrics if k.startswith(("test/psnr", "bench/"))):
+    for key in sorted(k for k in metrics if k.startswith(("test/psnr", "test/ssim", "test/flip", "bench/"))):
         print(f"  {key} = {metrics[key]:.4g}")
     return metrics.get("val/psnr")
 

@@ -54,6 +54,7 @@ class SuperResolutionModule(L.LightningModule):
         detach_history: bool = False,
         loss_space: str = "linear",
         tonemap_exposure: float | str | None = None,
+        warmup_steps: int = 0,
     ) -> None:
         super().__init__()
         # Plain containers only: checkpoints then load with weights_only=True and rebuild the network.
@@ -70,6 +71,7 @@ class SuperResolutionModule(L.LightningModule):
             "detach_history": detach_history,
             "loss_space": loss_space,
             "tonemap_exposure": tonemap_exposure,
+            "warmup_steps": int(warmup_steps),
         }
         if isinstance(net, nn.Module):
             self.net = net
@@ -284,6 +286,17 @@ class SuperResolutionModule(L.LightningModule):
             return optimizer
         scheduler = instantiate(self.scheduler_config)(optimizer)
         return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
+
+    def optimizer_step(self, epoch: int, batch_idx: int, optimizer: Any, optimizer_closure: Any = None) -> None:
+        # Linear learning-rate warm-up over the first warmup_steps optimiser steps (Lightning's recipe: scale the
+        # groups' lr before stepping); the epoch scheduler takes over after it, from the same initial lr.
+        warmup = self.hparams.warmup_steps
+        if warmup and self.trainer.global_step <= warmup:
+            scale = min(1.0, (self.trainer.global_step + 1) / warmup)
+            for group in optimizer.param_groups:
+                group.setdefault("initial_lr", group["lr"])
+                group["lr"] = group["initial_lr"] * scale
+        super().optimizer_step(epoch, batch_idx, optimizer, optimizer_closure)
 
 
 def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None], tone: ToneMap):
