@@ -3,9 +3,12 @@
 Reads the jobs of a sweep (the runs nested under its parent run) and writes, into
 ``outputs/reports/<sweep>/`` and as artifacts of the parent run:
 
-* ``table.md`` and ``table.csv``: one row per configuration (the ``variant`` tag, or the group tags), the
-  test metrics per scale and their average over scales, as mean and 95% interval over seeds; a cell whose
-  jobs failed says so instead of disappearing;
+* ``table.md``: one compact table as the paper prints it: a row per configuration (the sweep's axes other than
+  the seed, named as the paper names its rows: ``SWT-db4``, ``No wavelet``, ``Bilinear (demod.)``), PSNR, SSIM,
+  FLIP (and LPIPS when logged) at the table's scale, each ``mean ± half-width`` of the 95% t-interval over the
+  ``n`` seeds (``n/a`` with one seed), the best of each column in bold; a cell whose jobs failed says so
+  instead of disappearing;
+* ``table.csv``: every metric at every scale and their average over scales, as mean, 95% half-width and n;
 * ``tradeoff.png``: PSNR and FLIP against ms/frame and against GFLOPs, the Pareto front marked, with the
   training wall-clock per configuration beside it;
 * ``qualitative.png``: the same crop of the first test frame from every configuration and the target.
@@ -14,18 +17,56 @@ Reads the jobs of a sweep (the runs nested under its parent run) and writes, int
 from __future__ import annotations
 
 import argparse
+import csv
+import io
 import math
 import os
+import re
 import statistics
 import tempfile
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Sequence
 from pathlib import Path
 
 __all__ = ["collect", "main", "report"]
 
-LOWER_IS_BETTER = ("flip", "flip_hdr", "lpips")
-ROW_TAGS = ("transform", "basis", "head", "scale", "temporal", "model")
+# The compact table's columns: metric, heading, decimals, higher is better. Cost columns stand in for the
+# quality ones in a sweep that tests nothing (the runtime figure).
+QUALITY = (
+    ("psnr", "PSNR", 2, True),
+    ("ssim", "SSIM", 4, True),
+    ("flip", "FLIP", 4, False),
+    ("lpips", "LPIPS", 4, False),
+)
+COST = (
+    ("bench/ms_per_frame", "ms/frame", 1, False),
+    ("bench/gflops", "GFLOPs", 1, False),
+    ("bench/params_m", "params (M)", 3, False),
+)
+# Row names as the paper's tables print them, by variant (conf/variant) or, without one, by baseline model.
+PAPER_LABELS = {
+    "none": "No wavelet",
+    "dwt_haar": "DWT-haar",
+    "swt_haar": "SWT-haar",
+    "swt_sym4": "SWT-sym4",
+    "swt_db4": "SWT-db4",
+    "fusion_ll": "Fusion-LL (SWT-haar)",
+    "multi_inr": "Multi-INR (DWT-haar)",
+    "fixed2x": "Single-scale (DWT-haar)",
+    "bicubic": "Bicubic",
+    "bilinear": "Bilinear",
+    "bilinear_demodulated": "Bilinear (demod.)",
+    "joint_bilateral": "Joint bilateral",
+    "real_esrgan": "Real-ESRGAN",
+    "nsrr": "NSRR",
+    "fusesr": "FuseSR",
+    "dfasr": "DFASR",
+}
+# The scale a paper table reports when its sweep tests several: "avg" is the mean over the tested scales.
+PAPER_SCALES = {"ablation_wavelet": "2x", "ablation_arch": "2x", "methods": "3x", "scales": "avg"}
+# Hydra's override_dirname joins ``key=value`` items with commas and does not escape list values ("[2.0,3.0]"):
+# an item starts only where a key and "=" follow the comma.
+_ITEM = re.compile(r",(?=[+~]*[\w.@/-]+=)")
 
 
 def _client(uri: str | None):
@@ -46,10 +87,50 @@ def find_parent(client, sweep: str | None = None, parent: str | None = None):
     return parents[0]
 
 
-def row_label(tags: dict[str, str]) -> str:
+def overrides(run) -> dict[str, str]:
+    """A job's Hydra overrides, read back from its run name (the job's ``override_dirname``); {} for a custom name."""
+    name = run.data.tags.get("mlflow.runName", "")
+    items = [item.split("=", 1) for item in _ITEM.split(name)] if name else []
+    if not items or any(len(item) != 2 for item in items):
+        return {}
+    return {key.lstrip("+~"): value for key, value in items}
+
+
+def sweep_axes(runs: Sequence) -> list[str]:
+    """The override keys whose value differs between the jobs (the sweep's axes), the seed left out."""
+    jobs = [overrides(run) for run in runs]
+    keys = sorted({key for job in jobs for key in job} - {"seed"})
+    return [key for key in keys if len({job.get(key) for job in jobs}) > 1]
+
+
+def base_label(tags: dict[str, str]) -> tuple[str, set[str]]:
+    """The paper's name of a run's configuration, and the override keys that name already says."""
     if tags.get("variant"):
-        return tags["variant"]
-    return ", ".join(f"{k}={tags[k]}" for k in ROW_TAGS if k in tags and not tags[k].startswith("n/a"))
+        return PAPER_LABELS.get(tags["variant"], tags["variant"]), {"variant"}
+    transform, basis, model = tags.get("transform", ""), tags.get("basis", ""), tags.get("model", "")
+    if transform.startswith("n/a") and model:  # a baseline: no wavelet, its model names it
+        return PAPER_LABELS.get(model, model), {"model"}
+    if transform == "none":
+        return "No wavelet", {"transform", "basis"}
+    if transform and basis:
+        return f"{transform.upper()}-{basis}", {"transform", "basis"}
+    return "default", set()
+
+
+def configuration(run, axes: Sequence[str]) -> str:
+    """A row's label: the paper's name, then every other axis of the sweep as ``key=value``."""
+    label, said = base_label(_tags(run))
+    job = overrides(run)
+    return ", ".join([label, *(f"{key}={job.get(key, 'default')}" for key in axes if key not in said)])
+
+
+def group(runs: Sequence) -> dict[str, list]:
+    """The jobs of each configuration, rows in the order their first job started."""
+    axes = sweep_axes(runs)
+    groups: dict[str, list] = defaultdict(list)
+    for run in sorted(runs, key=lambda r: r.info.start_time):
+        groups[configuration(run, axes)].append(run)
+    return dict(groups)
 
 
 def collect(client, parent_id: str) -> list:
@@ -58,26 +139,23 @@ def collect(client, parent_id: str) -> list:
 
 
 def interval(values: list[float]) -> tuple[float, float]:
-    """Mean and half-width of the 95% t-interval (0 for a single value)."""
+    """Mean and half-width of the 95% t-interval of the finite values (NaN, undefined, below two values)."""
     finite = [v for v in values if math.isfinite(v)]
     if not finite:
         return float("nan"), float("nan")
     mean = statistics.fmean(finite)
     if len(finite) < 2:
-        return mean, 0.0
+        return mean, float("nan")
     from scipy.stats import t
 
     return mean, float(t.ppf(0.975, len(finite) - 1) * statistics.stdev(finite) / math.sqrt(len(finite)))
 
 
-def summarise(runs: list) -> tuple[list[str], dict[str, dict[str, tuple[float, float, int]]], dict[str, str]]:
-    """Rows (in first-seen order), per-row metric summaries, and a note per row about failed jobs."""
-    by_row: dict[str, list] = defaultdict(list)
-    for run in sorted(runs, key=lambda r: r.info.start_time):
-        by_row[row_label(_tags(run))].append(run)
+def summarise(groups: dict[str, list]) -> tuple[dict[str, dict[str, tuple[float, float, int]]], dict[str, str]]:
+    """Per row, every metric as (mean, 95% half-width, n finite values); and a note per row about failed jobs."""
     metrics: dict[str, dict[str, tuple[float, float, int]]] = {}
     notes: dict[str, str] = {}
-    for row, row_runs in by_row.items():
+    for row, row_runs in groups.items():
         finished = [r for r in row_runs if r.info.status == "FINISHED"]
         failed = [r for r in row_runs if r.info.status != "FINISHED"]
         if failed:
@@ -94,8 +172,8 @@ def summarise(runs: list) -> tuple[list[str], dict[str, dict[str, tuple[float, f
                 data[f"test/{name}_avg"] = statistics.fmean(scaled)
             for key, value in data.items():
                 values[key].append(value)
-        metrics[row] = {k: (*interval(v), len(v)) for k, v in values.items()}
-    return list(by_row), metrics, notes
+        metrics[row] = {k: (*interval(v), sum(math.isfinite(x) for x in v)) for k, v in values.items()}
+    return metrics, notes
 
 
 def _tags(run) -> dict[str, str]:
@@ -110,27 +188,123 @@ def _scale_metric(key: str) -> tuple[str, str] | None:
     return (name, scale) if scale.endswith("x") and scale[:-1].replace(".", "").isdigit() else None
 
 
-def table(rows, metrics, notes, columns: Sequence[str]) -> tuple[str, str]:
-    """Markdown and CSV: mean +- 95% interval over seeds (n), or the reason a cell is missing."""
-    header = ["configuration", *columns, "seeds", "note"]
-    md = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    csv = [",".join(header + [f"{c} ci95" for c in columns])]
+def test_scales(metrics: dict[str, dict[str, tuple[float, float, int]]]) -> list[str]:
+    """The scales the sweep tested (``2x``, ...), smallest first."""
+    scales = {parsed[1] for m in metrics.values() for k in m if (parsed := _scale_metric(k)) and parsed[0] == "psnr"}
+    return sorted(scales, key=lambda s: float(s[:-1]))
+
+
+def table_scale(sweep: str, scales: Sequence[str], requested: str | None = None) -> str:
+    """The table's scale: the one asked for, the sweep's only one, else its paper table's (2x if unknown)."""
+    if requested:
+        if requested in scales or (requested == "avg" and len(scales) > 1):
+            return requested
+        raise SystemExit(f"wdss.report: no test metrics at {requested!r}; this sweep has {', '.join(scales) or 'none'}")
+    if len(scales) <= 1:
+        return scales[0] if scales else "2x"
+    paper = PAPER_SCALES.get(sweep, "2x" if sweep.startswith("ablation") else None)
+    if paper in scales or paper == "avg":
+        return paper
+    return "2x" if "2x" in scales else scales[0]
+
+
+def _scale_words(scale: str, scales: Sequence[str]) -> str:
+    return f"mean of {'/'.join(scales)}" if scale == "avg" else scale
+
+
+def compact_columns(metrics, scale: str, scales: Sequence[str]) -> list[tuple[str, str, int, bool]]:
+    """(metric key, heading, decimals, higher is better) of the compact table, only what the runs logged."""
+
+    def logged(key: str) -> bool:
+        return any(key in m for m in metrics.values())
+
+    columns = [
+        (f"test/{name}_{scale}", f"{heading} {'↑' if higher else '↓'}", decimals, higher)
+        for name, heading, decimals, higher in QUALITY
+        if logged(f"test/{name}_{scale}")
+    ]
+    if columns and len(scales) > 1 and scale != "avg" and logged("test/psnr_avg"):
+        columns.append(("test/psnr_avg", f"PSNR {_scale_words('avg', scales)} ↑", 2, True))
+    if not columns:  # nothing tested (a runtime sweep): its cost is the table
+        columns = [(key, f"{heading} ↓", decimals, higher) for key, heading, decimals, higher in COST if logged(key)]
+    return columns
+
+
+def _fixed(value: float, decimals: int) -> str:
+    """``value`` to ``decimals`` places, or to its first significant digit when those would show 0."""
+    if value > 0 and round(value, decimals) == 0:
+        decimals = 1 - math.floor(math.log10(value))
+    return f"{value:.{decimals}f}"
+
+
+def compact_table(rows: Sequence[str], metrics, notes: dict[str, str], columns, scales: Sequence[str]) -> str:
+    """The paper-style markdown table: ``mean ± half-width`` (``n/a`` with one seed), the best per column bold."""
+    cells: dict[str, list[str]] = {row: [] for row in rows}
+    for key, _, decimals, higher in columns:
+        means: dict[str, float] = {}
+        for row in rows:
+            mean, half, n = metrics[row].get(key, (float("nan"), float("nan"), 0))
+            row_scales = [s for s in scales if f"test/psnr_{s}" in metrics[row]]
+            if key.endswith("_avg") and row_scales and row_scales != list(scales):
+                cells[row].append(f"n/a (only {'/'.join(row_scales)})")  # not comparable with the full mean
+            elif n == 0 or not math.isfinite(mean):
+                cells[row].append("missing")
+            else:
+                half_text = _fixed(half, decimals) if n > 1 and math.isfinite(half) else "n/a"
+                cells[row].append(f"{mean:.{decimals}f} ± {half_text}")
+                means[row] = round(mean, decimals)
+        if len(means) > 1:  # bold the best shown value, ties included
+            best = max(means.values()) if higher else min(means.values())
+            for row, mean in means.items():
+                if mean == best:
+                    cells[row][-1] = f"**{cells[row][-1]}**"
+    with_notes = any(notes.get(row) for row in rows)
+    header = ["Configuration", *(heading for _, heading, _, _ in columns), "n", *(["note"] if with_notes else [])]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for row in rows:
-        cells, raw = [], []
-        count = 0
-        for column in columns:
-            mean, half, n = metrics[row].get(column, (float("nan"), float("nan"), 0))
-            count = max(count, n)
-            cells.append("missing" if not math.isfinite(mean) else f"{mean:.4g} ± {half:.2g}")
-            raw.append((mean, half))
-        note = notes.get(row, "")
-        md.append("| " + " | ".join([row, *cells, str(count), note]) + " |")
-        csv.append(
-            ",".join(
-                [f'"{row}"', *(f"{m:.6g}" for m, _ in raw), str(count), f'"{note}"', *(f"{h:.6g}" for _, h in raw)]
-            )
-        )
-    return "\n".join(md) + "\n", "\n".join(csv) + "\n"
+        n = max((metrics[row].get(key, (0, 0, 0))[2] for key, *_ in columns), default=0)
+        note = [notes.get(row, "")] if with_notes else []
+        lines.append("| " + " | ".join([row, *cells[row], str(n), *note]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def full_csv(rows: Sequence[str], metrics, notes: dict[str, str]) -> str:
+    """Every metric of every row: mean, 95% half-width (empty below two seeds) and n."""
+    keys = sorted({k for m in metrics.values() for k in m})
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(["configuration", "seeds", "note", *(f"{k}{part}" for k in keys for part in ("", " ci95", " n"))])
+    for row in rows:
+        values = []
+        for key in keys:
+            mean, half, n = metrics[row].get(key, (float("nan"), float("nan"), 0))
+            values += [
+                f"{mean:.6g}" if math.isfinite(mean) else "",
+                f"{half:.6g}" if n > 1 and math.isfinite(half) else "",
+                n,
+            ]
+        seeds = max((s[2] for s in metrics[row].values()), default=0)
+        writer.writerow([row, seeds, notes.get(row, ""), *values])
+    return out.getvalue()
+
+
+def metric_path(runs: Sequence) -> str:
+    """How the metrics were measured, as the runs' parameters say: the tone map and its exposure."""
+    from wdss.data.tonemap import DEFAULT_EXPOSURE
+
+    paths = set()
+    for run in runs:
+        params = run.data.params
+        name = params.get("model.tonemap_name", params.get("tonemap_name", "hable"))
+        exposure = params.get("tonemap_exposure", "None")
+        if exposure in ("None", ""):
+            exposure = f"exposure {DEFAULT_EXPOSURE.get(name, 1.0):g} (the curve's default)"
+        elif exposure == "auto":
+            exposure = "exposure auto (per image, from the target's median luminance)"
+        else:
+            exposure = f"exposure {exposure}"
+        paths.add(f"{name.capitalize()}, {exposure}")
+    return "; ".join(sorted(paths))
 
 
 def pareto(points: list[tuple[float, float]], higher_is_better: bool) -> list[int]:
@@ -164,7 +338,8 @@ def tradeoff_plot(rows, metrics, path: Path, scale: str) -> None:
                 if cost in m and quality in m and math.isfinite(m[cost][0]) and math.isfinite(m[quality][0]):
                     points.append((m[cost][0], m[quality][0]))
                     labels.append(row)
-                    ax.errorbar(m[cost][0], m[quality][0], yerr=m[quality][1], fmt="o", capsize=3)
+                    error = m[quality][1] if math.isfinite(m[quality][1]) else 0.0  # one seed: no interval
+                    ax.errorbar(m[cost][0], m[quality][0], yerr=error, fmt="o", capsize=3)
                     ax.annotate(row, (m[cost][0], m[quality][0]), fontsize=7, xytext=(3, 3), textcoords="offset points")
             if not points:
                 ax.text(
@@ -197,7 +372,7 @@ def tradeoff_plot(rows, metrics, path: Path, scale: str) -> None:
     plt.close(fig)
 
 
-def qualitative_figure(client, rows, runs, path: Path, scale: str, crop: int = 96) -> bool:
+def qualitative_figure(client, groups: dict[str, list], path: Path, scale: str, crop: int = 96) -> bool:
     """The same crop of the first test frame from one run of every row, and the target."""
     import matplotlib
 
@@ -207,8 +382,8 @@ def qualitative_figure(client, rows, runs, path: Path, scale: str, crop: int = 9
 
     images, target = {}, None
     with tempfile.TemporaryDirectory() as tmp:
-        for row in rows:
-            run = next((r for r in runs if row_label(_tags(r)) == row and r.info.status == "FINISHED"), None)
+        for row, runs in groups.items():
+            run = next((r for r in runs if r.info.status == "FINISHED"), None)
             if run is None:
                 continue
             try:
@@ -242,37 +417,45 @@ def report(
     *,
     tracking_uri: str | None = None,
     out_dir: str | Path = "outputs/reports",
-    scale: str = "2x",
+    scale: str | None = None,
 ) -> Path:
-    """Write the sweep's table, trade-off plot and qualitative figure; log them on the parent run."""
+    """Write the sweep's table, trade-off plot and qualitative figure; log them on the parent run.
+
+    ``scale``: the table's and the plots' scale (``3x``, or ``avg`` over the tested scales); by default the
+    sweep's only test scale, else its paper table's (``PAPER_SCALES``).
+    """
     client = _client(tracking_uri)
     parent_run = find_parent(client, sweep, parent)
     name = sweep or parent_run.data.tags.get("sweep", parent_run.info.run_id)
     runs = collect(client, parent_run.info.run_id)
     if not runs:
         raise SystemExit(f"wdss.report: the sweep {name!r} ({parent_run.info.run_id}) has no jobs")
-    rows, metrics, notes = summarise(runs)
-    scales = sorted({k.rsplit("_", 1)[1] for m in metrics.values() for k in m if k.startswith("test/psnr_")})
-    columns = [
-        f"test/{m}_{s}"
-        for s in scales
-        for m in ("psnr", "ssim", "flip", "lpips")
-        if any(f"test/{m}_{s}" in v for v in metrics.values())
-    ]
-    columns += [
-        c for c in ("bench/ms_per_frame", "bench/gflops", "time/train_s") if any(c in v for v in metrics.values())
-    ]
+    groups = group(runs)
+    rows = list(groups)
+    metrics, notes = summarise(groups)
+    scales = test_scales(metrics)
+    shown = table_scale(name, scales, scale)
+    columns = compact_columns(metrics, shown, scales)
+    statuses = Counter(run.info.status for run in runs)
+    counts = ", ".join(f"{n} {status.lower() if status == 'FINISHED' else status}" for status, n in statuses.items())
+    markdown = (
+        f"# {name}\n\n"
+        + (f"Test metrics at {_scale_words(shown, scales)}: " if scales else "Inference cost: ")
+        + "mean ± half-width of the 95% t-interval over n seeds (n/a with one seed); the best of each column in bold."
+        + "\n\n"
+        + compact_table(rows, metrics, notes, columns, scales)
+        + f"\nMetrics on tone-mapped output: {metric_path(runs)}. {len(runs)} runs ({counts}); "
+        + f"parent run {parent_run.info.run_id}; every metric at every scale in table.csv.\n"
+    )
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
-    markdown, csv = table(rows, metrics, notes, columns)
-    title = f"# {name}\n\nparent run {parent_run.info.run_id}; mean ± 95% interval over seeds\n\n"
-    (out / "table.md").write_text(title + markdown)
-    (out / "table.csv").write_text(csv)
-    plot_scale = scale if scale in scales or not scales else scales[0]
-    tradeoff_plot(rows, metrics, out / "tradeoff.png", plot_scale)
-    qualitative_figure(client, rows, runs, out / "qualitative.png", plot_scale)
+    (out / "table.md").write_text(markdown)
+    (out / "table.csv").write_text(full_csv(rows, metrics, notes))
+    plot_scale = shown if shown in scales or not scales else ("2x" if "2x" in scales else scales[0])
+    tradeoff_plot(rows, metrics, out / "tradeoff.png", shown)  # "avg" plots the means over scales
+    qualitative_figure(client, groups, out / "qualitative.png", plot_scale)
     client.log_artifacts(parent_run.info.run_id, str(out), "report")
-    print(title + markdown)
+    print(markdown)
     print(f"wdss.report: wrote {out} (also logged on run {parent_run.info.run_id})")
     return out
 
@@ -287,7 +470,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     which.add_argument("--parent", help="the parent run id")
     parser.add_argument("--tracking-uri", default=None, help="default: $MLFLOW_TRACKING_URI or sqlite:///mlflow.db")
     parser.add_argument("--out", default="outputs/reports")
-    parser.add_argument("--scale", default="2x", help="the scale of the plots, e.g. 3x")
+    parser.add_argument(
+        "--scale",
+        default=None,
+        help="the scale of the table and plots, e.g. 3x, or avg (default: the sweep's only test scale, else its "
+        "paper table's: 2x for the ablations, 3x for methods, avg for scales)",
+    )
     args = parser.parse_args(argv)
     report(args.sweep, args.parent, tracking_uri=args.tracking_uri, out_dir=args.out, scale=args.scale)
 

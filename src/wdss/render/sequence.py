@@ -94,7 +94,7 @@ def render_sequence(
     """Render one sequence into ``out_dir/name`` and return that folder. ``resolution`` is (width, height).
 
     The scene is ``random_scene(seed)`` unless a ``spec`` is given. ``exposure``: the factor every frame's
-    radiance is multiplied by, or ``"auto"``: chosen from frame 0 by :func:`wdss.render.exposure.auto_exposure`
+    radiance is multiplied by, or ``"auto"``: chosen from probe renders by :func:`wdss.render.exposure.auto_exposure`
     and recorded in ``sequence.json`` (so a resumed render applies the same factor).
     """
     from wdss.render.convert import to_buffers
@@ -165,14 +165,14 @@ def render_sequence(
     from wdss.render.blender import BlenderScene
 
     scene = BlenderScene(spec, samples=samples, denoise=denoise, filter_width=filter_width, threads=threads)
+    if meta["exposure"] is None:  # recorded before any file is written: a resumed render applies the same
+        meta["exposure"] = _probe_exposure(scene, frames, width, height)
+        _write_json(sidecar, meta)
     for frame in todo:
         start = time.perf_counter()
         camera = camera_pose(spec.camera, frame)
         previous = camera_pose(spec.camera, frame - 1)
         hr = to_buffers(scene.render(frame, width, height), camera=camera, previous_camera=previous, lens=lens)
-        if meta["exposure"] is None:  # recorded before any file is written: a resumed render applies the same
-            meta["exposure"] = auto_exposure(hr["color"])
-            _write_json(sidecar, meta)
         hr["color"] = hr["color"] * np.float32(meta["exposure"])
         write_unreal_frame(folder / f"{height}P", frame, hr, compression, half)
         for s in scales:
@@ -189,6 +189,14 @@ def render_sequence(
         if progress is not None:
             progress.advance(task)
     return folder
+
+
+def _probe_exposure(scene: Any, frames: int, width: int, height: int) -> float:
+    """The sequence's auto exposure from quick quarter-size renders of its first, middle and last frames: one
+    frame can be unrepresentative of a camera path (a lamp filling the first view)."""
+    size = (max(8, width // 4), max(8, height // 4))
+    probes = [scene.render(f, *size, samples=4)["Combined"][:3] for f in sorted({0, frames // 2, frames})]
+    return auto_exposure(np.concatenate(probes, axis=-1))
 
 
 def render_sequences(out_dir: str | Path, sequences: Iterable[Mapping[str, Any]], **settings: Any) -> list[Path]:
