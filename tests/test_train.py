@@ -233,7 +233,10 @@ def test_a_tiny_sweep_nests_its_runs_survives_a_failing_job_and_reports(tmp_path
     assert report.returncode == 0, report.stderr[-3000:]
     out = tmp_path / "reports" / "ablation_wavelet"
     table = (out / "table.md").read_text()
-    assert "| swt_haar |" in table and "1 of 2 jobs FAILED |" in table and "| bilinear_demodulated |" in table
+    # One row per value of the sweep's axes (variant, data.patch_size), named as the paper names its rows.
+    assert "| SWT-haar, data.patch_size=24 |" in table and "| Bilinear (demod.), data.patch_size=24 |" in table
+    failed = next(line for line in table.splitlines() if line.startswith("| SWT-haar, data.patch_size=1000 |"))
+    assert "missing" in failed and failed.endswith("| 1 of 1 jobs FAILED |")
     assert (out / "tradeoff.png").stat().st_size > 0 and (out / "qualitative.png").stat().st_size > 0
     client, runs = sweep_client(tmp_path, "ablation_wavelet")
     parents = [r for r in runs if "mlflow.parentRunId" not in r.data.tags]

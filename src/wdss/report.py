@@ -279,8 +279,8 @@ def full_csv(rows: Sequence[str], metrics, notes: dict[str, str]) -> str:
         for key in keys:
             mean, half, n = metrics[row].get(key, (float("nan"), float("nan"), 0))
             values += [
-                f"{mean:.6g}" if math.isfinite(mean) else "",
-                f"{half:.6g}" if n > 1 and math.isfinite(half) else "",
+                repr(mean) if math.isfinite(mean) else "",  # full precision: the data, not a display
+                repr(half) if n > 1 and math.isfinite(half) else "",
                 n,
             ]
         seeds = max((s[2] for s in metrics[row].values()), default=0)
@@ -436,7 +436,7 @@ def report(
     scales = test_scales(metrics)
     shown = table_scale(name, scales, scale)
     columns = compact_columns(metrics, shown, scales)
-    statuses = Counter(run.info.status for run in runs)
+    statuses = Counter(sorted((run.info.status for run in runs), key=lambda status: status != "FINISHED"))
     counts = ", ".join(f"{n} {status.lower() if status == 'FINISHED' else status}" for status, n in statuses.items())
     markdown = (
         f"# {name}\n\n"

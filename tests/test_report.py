@@ -1,0 +1,180 @@
+"""The sweep report from fake MLflow sweeps in a temporary SQLite store: the compact paper-style table."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from wdss.report import overrides, report, table_scale
+
+SEEDS = (0, 1, 2)
+
+
+def fake_sweep(root, name: str, jobs: list[tuple[dict[str, str], dict[str, float], str]]) -> str:
+    """A parent run tagged ``sweep=name`` and one nested run per job (overrides, metrics, status), as
+    ``wdss.train`` logs them: the run named by its overrides, the variant and seed tags, the tone-map params."""
+    from mlflow import MlflowClient
+
+    uri = f"sqlite:///{root}/mlflow.db"
+    client = MlflowClient(uri)
+    experiment = client.create_experiment(name, artifact_location=(root / "artifacts").as_uri())
+    parent = client.create_run(experiment, run_name=f"sweep {name}", tags={"sweep": name}, start_time=1)
+    for i, (job, metrics, status) in enumerate(jobs):
+        run = client.create_run(
+            experiment,
+            run_name=",".join(f"{k}={v}" for k, v in sorted(job.items())),
+            tags={"mlflow.parentRunId": parent.info.run_id, "sweep": name, "variant": job["variant"], "seed": "0"},
+            start_time=10 + i,
+        )
+        client.log_param(run.info.run_id, "model.tonemap_name", "hable")
+        client.log_param(run.info.run_id, "tonemap_exposure", "None")
+        for key, value in metrics.items():
+            client.log_metric(run.info.run_id, key, value)
+        client.set_terminated(run.info.run_id, status)
+    client.set_terminated(parent.info.run_id, "FINISHED")
+    return uri
+
+
+def body(markdown: str) -> tuple[list[str], dict[str, list[str]]]:
+    """The table's header cells and its rows by configuration."""
+    lines = [line for line in markdown.splitlines() if line.startswith("| ")]
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines]
+    return cells[0], {row[0]: row[1:] for row in cells[1:]}
+
+
+def t_half_width(values) -> float:
+    values = np.asarray(values, dtype=float)
+    return float(stats.t.ppf(0.975, len(values) - 1) * values.std(ddof=1) / math.sqrt(len(values)))
+
+
+# Three seeds of three configurations of the wavelet ablation at 2x, 3x, 4x; SWT-db4 is best in PSNR and
+# SSIM, DWT-haar in FLIP; one No-wavelet job failed.
+PSNR = {"none": (28.91, 29.12, 28.77), "dwt_haar": (29.40, 29.61, 29.35), "swt_db4": (30.43, 30.58, 30.21)}
+FLIP = {"none": (0.1401, 0.1388, 0.1420), "dwt_haar": (0.1102, 0.1121, 0.1095), "swt_db4": (0.1200, 0.1189, 0.1211)}
+
+
+@pytest.fixture(scope="module")
+def three_seeds(tmp_path_factory):
+    root = tmp_path_factory.mktemp("three_seeds")
+    jobs = []
+    for variant in PSNR:
+        for seed in SEEDS:
+            metrics = {}
+            for k, scale in enumerate(("2x", "3x", "4x")):
+                metrics[f"test/psnr_{scale}"] = PSNR[variant][seed] - k
+                metrics[f"test/ssim_{scale}"] = 0.9 + PSNR[variant][seed] / 1000 - k / 100
+                metrics[f"test/flip_{scale}"] = FLIP[variant][seed] + k / 100
+            jobs.append(({"experiment": "cpu", "variant": variant, "seed": str(seed)}, metrics, "FINISHED"))
+    jobs.append(({"experiment": "cpu", "variant": "none", "seed": "3"}, {}, "FAILED"))
+    uri = fake_sweep(root, "ablation_wavelet", jobs)
+    out = report("ablation_wavelet", tracking_uri=uri, out_dir=root / "reports")
+    return out
+
+
+def test_one_row_per_configuration_named_as_the_paper_does(three_seeds):
+    header, rows = body((three_seeds / "table.md").read_text())
+    assert list(rows) == ["No wavelet", "DWT-haar", "SWT-db4"]
+    assert header[:4] == ["Configuration", "PSNR ↑", "SSIM ↑", "FLIP ↓"]
+    assert "LPIPS ↓" not in header  # no run logged LPIPS
+    assert header[-2:] == ["n", "note"] and rows["SWT-db4"][-2:] == ["3", ""]
+    assert rows["No wavelet"][-1] == "1 of 4 jobs FAILED"  # the failed job is marked, its seeds left out
+
+
+def test_cells_are_the_mean_and_the_95_t_interval_at_the_ablations_paper_scale(three_seeds):
+    text = (three_seeds / "table.md").read_text()
+    header, rows = body(text)
+    assert "Test metrics at 2x" in text  # several scales tested: the wavelet ablation's table is at 2x
+    psnr = rows["DWT-haar"][header.index("PSNR ↑") - 1]
+    values = PSNR["dwt_haar"]
+    assert psnr == f"{np.mean(values):.2f} ± {t_half_width(values):.2f}"
+    flip = rows["No wavelet"][header.index("FLIP ↓") - 1]
+    assert flip == f"{np.mean(FLIP['none']):.4f} ± {t_half_width(FLIP['none']):.4f}"
+    assert header[4] == "PSNR mean of 2x/3x/4x ↑"  # one compact mean-over-scales column
+    assert rows["SWT-db4"][3].strip("*").startswith(f"{np.mean(PSNR['swt_db4']) - 1:.2f} ± ")
+
+
+def test_the_best_value_of_each_column_is_bold(three_seeds):
+    header, rows = body((three_seeds / "table.md").read_text())
+    bold = {
+        column: [row for row, cells in rows.items() if cells[i].startswith("**")]
+        for i, column in enumerate(header[1:5])
+    }
+    assert bold == {
+        "PSNR ↑": ["SWT-db4"],
+        "SSIM ↑": ["SWT-db4"],
+        "FLIP ↓": ["DWT-haar"],  # lower is better
+        "PSNR mean of 2x/3x/4x ↑": ["SWT-db4"],
+    }
+
+
+def test_the_csv_keeps_every_metric_at_every_scale_with_interval_and_n(three_seeds):
+    with open(three_seeds / "table.csv", newline="") as f:
+        rows = {row["configuration"]: row for row in csv.DictReader(f)}
+    assert set(rows) == {"No wavelet", "DWT-haar", "SWT-db4"}
+    row = rows["SWT-db4"]
+    for metric in ("psnr", "ssim", "flip"):
+        for scale in ("2x", "3x", "4x", "avg"):
+            assert f"test/{metric}_{scale}" in row and row[f"test/{metric}_{scale} n"] == "3"
+    assert float(row["test/psnr_4x"]) == pytest.approx(np.mean(PSNR["swt_db4"]) - 2)
+    assert float(row["test/psnr_4x ci95"]) == pytest.approx(t_half_width(PSNR["swt_db4"]))
+    assert rows["No wavelet"]["note"] == "1 of 4 jobs FAILED"
+    assert (three_seeds / "tradeoff.png").stat().st_size > 0  # the plots still come out
+
+
+@pytest.fixture(scope="module")
+def one_seed(tmp_path_factory):
+    root = tmp_path_factory.mktemp("one_seed")
+    jobs = [
+        ({"variant": "bicubic", "seed": "0"}, {"test/psnr_3x": 24.0, "test/ssim_3x": 0.76, "test/lpips_3x": 0.35}, ""),
+        ({"variant": "swt_db4", "seed": "0"}, {"test/psnr_3x": 29.7, "test/ssim_3x": 0.89, "test/lpips_3x": 0.12}, ""),
+        ({"variant": "dfasr", "seed": "0"}, {"test/psnr_3x": 28.2, "test/ssim_3x": 0.85, "test/lpips_3x": 0.18}, ""),
+    ]
+    uri = fake_sweep(root, "methods", [(job, metrics, "FINISHED") for job, metrics, _ in jobs])
+    return report("methods", tracking_uri=uri, out_dir=root / "reports")
+
+
+def test_one_seed_has_no_interval_and_lpips_shows_when_logged(one_seed):
+    text = (one_seed / "table.md").read_text()
+    header, rows = body(text)
+    assert header == ["Configuration", "PSNR ↑", "SSIM ↑", "LPIPS ↓", "n"]  # no FLIP logged, no failure noted
+    assert "Test metrics at 3x" in text
+    assert rows["Bicubic"] == ["24.00 ± n/a", "0.7600 ± n/a", "0.3500 ± n/a", "1"]
+    assert rows["SWT-db4"] == ["**29.70 ± n/a**", "**0.8900 ± n/a**", "**0.1200 ± n/a**", "1"]
+    assert "nan" not in text.lower() and "± 0" not in text
+    assert "Hable, exposure 10 (the curve's default)" in text and "3 runs (3 finished)" in text
+    with open(one_seed / "table.csv", newline="") as f:
+        swt = next(row for row in csv.DictReader(f) if row["configuration"] == "SWT-db4")
+    assert swt["test/psnr_3x ci95"] == "" and swt["test/psnr_3x n"] == "1"
+
+
+def test_other_axes_than_the_seed_split_rows_and_runs_names_parse_with_lists(tmp_path):
+    jobs = [
+        ({"variant": "swt_haar", "data.patch_size": str(p), "seed": str(s)}, {"test/psnr_2x": 30.0 + p / 100 + s}, "")
+        for p in (24, 48)
+        for s in (0, 1)
+    ]
+    uri = fake_sweep(tmp_path, "ablation_arch", [(job, metrics, "FINISHED") for job, metrics, _ in jobs])
+    _, rows = body((report("ablation_arch", tracking_uri=uri, out_dir=tmp_path / "reports") / "table.md").read_text())
+    assert list(rows) == ["SWT-haar, data.patch_size=24", "SWT-haar, data.patch_size=48"]
+    assert rows["SWT-haar, data.patch_size=48"][0] == f"**{30.98:.2f} ± {t_half_width([30.48, 31.48]):.2f}**"
+
+    class Run:  # only what overrides() reads
+        class data:
+            tags = {"mlflow.runName": "data.test_scales=[2.0,3.0],seed=1,variant=none"}
+
+    assert overrides(Run) == {"data.test_scales": "[2.0,3.0]", "seed": "1", "variant": "none"}
+
+
+def test_the_table_scale_follows_the_sweep():
+    assert table_scale("methods", ["3x"]) == "3x"  # its only test scale
+    assert table_scale("methods", ["2x", "3x", "4x"]) == "3x"  # the paper's methods table
+    assert table_scale("ablation_arch", ["2x", "3x", "4x"]) == "2x"
+    assert table_scale("scales", ["2x", "3x", "4x"]) == "avg"
+    assert table_scale("anything", ["3x", "4x"]) == "3x"
+    assert table_scale("methods", ["2x", "3x"], "2x") == "2x"
+    with pytest.raises(SystemExit, match="no test metrics at '5x'"):
+        table_scale("methods", ["2x", "3x"], "5x")
