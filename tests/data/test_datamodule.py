@@ -312,3 +312,20 @@ def test_patches_round_down_to_a_multiple_of_a_native_scale(root):
     dataset = FrameDataset([Sequence(root / "seq_a")], ["lr_color", "target"], scale=3.0, patch=14)
     sample = dataset[0]
     assert sample["hr"]["color"].shape[-2:] == (12, 12) and sample["lr"]["color"].shape[-2:] == (4, 4)
+
+
+def test_patches_per_frame_draws_every_frame_that_often_with_distinct_randomness():
+    from wdss.data.dataset import EpochSampler
+
+    sampler = EpochSampler(5, seed=3, repeats=3)
+    sampler.set_epoch(2)
+    draws = list(sampler)
+    assert len(draws) == len(sampler) == 15
+    assert sorted(i for i, _ in draws) == sorted(list(range(5)) * 3)
+    assert len(set(draws)) == 15  # the same frame is drawn with three different (index, draw) seeds
+    assert {d for _, d in draws} == {6, 7, 8}  # draws of epoch 2 never reuse those of another epoch
+    again = EpochSampler(5, seed=3, repeats=3)
+    again.set_epoch(2)
+    assert list(again) == draws  # a function of (seed, epoch) alone: resume replays it
+    with pytest.raises(ValueError, match="patches_per_frame"):
+        EpochSampler(5, repeats=0)

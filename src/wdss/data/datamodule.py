@@ -69,7 +69,8 @@ class SceneDataModule(L.LightningDataModule):
 
     ``inputs`` are the batch keys the model consumes (the model config declares them). ``scale`` is a fixed
     training scale or a ``[low, high]`` range sampled per batch; validation runs full frames at
-    ``val_scale`` and testing at every scale of ``test_scales`` (one dataloader each). ``prepare`` is called
+    ``val_scale`` and testing at every scale of ``test_scales`` (one dataloader each). ``patches_per_frame``
+    random patches of every training frame make one epoch. ``prepare`` is called
     with ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset).
     """
 
@@ -84,6 +85,7 @@ class SceneDataModule(L.LightningDataModule):
         val_scale: float | None = None,
         test_scales: Iterable[float] = (2.0, 3.0, 4.0),
         patch_size: int | None = 96,
+        patches_per_frame: int = 1,
         batch_size: int = 8,
         eval_batch_size: int = 1,
         num_workers: int = 0,
@@ -109,6 +111,7 @@ class SceneDataModule(L.LightningDataModule):
         self.val_scale = float(val_scale) if val_scale is not None else self._middle(self.scale)
         self.test_scales = tuple(float(s) for s in test_scales)
         self.patch_size = patch_size
+        self.patches_per_frame = int(patches_per_frame)
         self.batch_size = batch_size
         self.eval_batch_size = eval_batch_size
         self.num_workers = num_workers
@@ -167,8 +170,8 @@ class SceneDataModule(L.LightningDataModule):
         return DataLoader(
             dataset,
             batch_size=batch_size,
-            sampler=EpochSampler(len(dataset), self.seed, shuffle=train),
-            drop_last=train and len(dataset) >= batch_size,
+            sampler=EpochSampler(len(dataset), self.seed, shuffle=train, repeats=self.patches_per_frame if train else 1),
+            drop_last=train and len(dataset) * self.patches_per_frame >= batch_size,
             num_workers=self.num_workers,
             pin_memory=self.pin_memory,
             persistent_workers=self.num_workers > 0,

@@ -383,26 +383,30 @@ def _mix(seed: int, epoch: int | None, index: int) -> int:
 
 
 class EpochSampler(Sampler):
-    """A random order that is a function of (seed, epoch) alone, yielding ``(index, epoch)``.
+    """A random order that is a function of (seed, epoch) alone, yielding ``(index, draw)``.
 
     Lightning calls :meth:`set_epoch` before each epoch, so resuming from epoch ``k`` replays the order (and,
     through the dataset's per-sample generators, the crops, flips and scales) of an uninterrupted run.
+    ``repeats``: each item is drawn that many times per epoch (several patches per frame of a small dataset),
+    each draw with its own randomness: ``draw = epoch * repeats + r``.
     """
 
-    def __init__(self, size: int, seed: int = 0, shuffle: bool = True) -> None:
-        self.size, self.seed, self.shuffle, self.epoch = size, seed, shuffle, 0
+    def __init__(self, size: int, seed: int = 0, shuffle: bool = True, repeats: int = 1) -> None:
+        if repeats < 1:
+            raise ValueError(f"data.patches_per_frame must be >= 1, got {repeats}")
+        self.size, self.seed, self.shuffle, self.epoch, self.repeats = size, seed, shuffle, 0, repeats
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = epoch
 
     def __len__(self) -> int:
-        return self.size
+        return self.size * self.repeats
 
     def __iter__(self):
-        order = range(self.size)
+        order = range(len(self))
         if self.shuffle:
-            order = torch.randperm(self.size, generator=torch.Generator().manual_seed(_mix(self.seed, self.epoch, 0)))
-        return iter([(int(i), self.epoch) for i in order])
+            order = torch.randperm(len(self), generator=torch.Generator().manual_seed(_mix(self.seed, self.epoch, 0)))
+        return iter([(int(v) % self.size, self.epoch * self.repeats + int(v) // self.size) for v in order])
 
 
 def brdf_of(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
