@@ -170,7 +170,9 @@ class SceneDataModule(L.LightningDataModule):
         return DataLoader(
             dataset,
             batch_size=batch_size,
-            sampler=EpochSampler(len(dataset), self.seed, shuffle=train, repeats=self.patches_per_frame if train else 1),
+            sampler=EpochSampler(
+                len(dataset), self.seed, shuffle=train, repeats=self.patches_per_frame if train else 1
+            ),
             drop_last=train and len(dataset) * self.patches_per_frame >= batch_size,
             num_workers=self.num_workers,
             pin_memory=self.pin_memory,

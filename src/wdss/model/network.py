@@ -261,6 +261,7 @@ class WDSSNet(nn.Module):
         phase_bias: bool = True,
         output_space: str = "linear",
         residual: str = "none",
+        exit_init: float = 0.0,
     ) -> None:
         super().__init__()
         if output_space not in OUTPUT_SPACES:
@@ -312,9 +313,13 @@ class WDSSNet(nn.Module):
         # Exit convolution: on RGB at H (none), on the DWT bands at H/2, on the SWT subbands at H.
         exit_channels = RGB if transform == "none" else self.coeff_channels
         self.exit = conv3x3(exit_channels, exit_channels)
-        if residual != "none":  # the network starts as its upsampler and learns only a correction of it
-            nn.init.zeros_(self.exit.weight)
-            nn.init.zeros_(self.exit.bias)
+        if residual != "none":
+            # exit_init 0: the network starts exactly as its upsampler (its correction is zero); > 0 scales the
+            # default initialisation instead: a zero exit passes no gradient to the layers before it, which then
+            # stay at their random initialisation for long (measured: exit weights ~1e-3 after 480 steps).
+            with torch.no_grad():
+                self.exit.weight.mul_(exit_init)
+                self.exit.bias.mul_(exit_init)
 
     @property
     def inputs(self) -> tuple[str, ...]:

@@ -195,7 +195,13 @@ def _probe_exposure(scene: Any, frames: int, width: int, height: int) -> float:
     """The sequence's auto exposure from quick quarter-size renders of its first, middle and last frames: one
     frame can be unrepresentative of a camera path (a lamp filling the first view)."""
     size = (max(8, width // 4), max(8, height // 4))
-    probes = [scene.render(f, *size, samples=4)["Combined"][:3] for f in sorted({0, frames // 2, frames})]
+    # Without the denoiser: OpenImageDenoise is not bit-reproducible across runs, and the exposure scales every
+    # frame, so a render of the same seed must find the same factor (16 spp here cost ~1 spp of a full frame).
+    denoise, scene.denoise = scene.denoise, False
+    try:
+        probes = [scene.render(f, *size, samples=16)["Combined"][:3] for f in sorted({0, frames // 2, frames})]
+    finally:
+        scene.denoise = denoise
     return auto_exposure(np.concatenate(probes, axis=-1))
 
 
