@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from wdss.render.exposure import MAX_DARKENING, MIDDLE_GREY, SATURATION, auto_exposure, luminance
+from wdss.data.tonemap import MIDDLE_GREY, luminance
+from wdss.render.exposure import MAX_DARKENING, SATURATION, auto_exposure
 
 
 def test_median_luminance_goes_to_middle_grey():

@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-__all__ = ["TONEMAPS", "ToneMap", "gamma", "hable", "median_luminance", "reinhard", "srgb", "tonemap"]
+__all__ = ["TONEMAPS", "ToneMap", "gamma", "hable", "luminance", "median_luminance", "reinhard", "srgb", "tonemap"]
 
 # The WDSS authors' Hable ("Uncharted 2") constants, exposure and white point.
 HABLE = {"A": 0.15, "B": 0.50, "C": 0.10, "D": 0.20, "E": 0.02, "F": 0.30}
@@ -66,10 +66,14 @@ DEFAULT_EXPOSURE = {"hable": 10.0}  # the curve's own exposure; 1 for the others
 MIDDLE_GREY = 0.18  # the linear median luminance that each curve's default exposure shows well (Hable: 0.46)
 
 
+def luminance(x):
+    """Rec. 709 luminance of linear colour ``(..., 3, H, W)`` (a torch tensor or a numpy array)."""
+    return 0.2126 * x[..., 0, :, :] + 0.7152 * x[..., 1, :, :] + 0.0722 * x[..., 2, :, :]
+
+
 def median_luminance(x: Tensor) -> Tensor:
     """Per-image median Rec. 709 luminance ``(N, 1, 1, 1)`` of linear colour ``(N, 3, H, W)``."""
-    lum = 0.2126 * x[:, 0] + 0.7152 * x[:, 1] + 0.0722 * x[:, 2]
-    return torch.nan_to_num(lum.flatten(1), nan=0.0).median(dim=1).values.view(-1, 1, 1, 1)
+    return torch.nan_to_num(luminance(x).flatten(1), nan=0.0).median(dim=1).values.view(-1, 1, 1, 1)
 
 
 class ToneMap:

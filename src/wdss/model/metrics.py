@@ -50,7 +50,8 @@ def flip_error(output: Tensor, target: Tensor, dynamic_range: str) -> Tensor:
 
 
 class ImageMetrics(nn.Module):
-    """Per-image metrics of remodulated linear colour, after tone mapping with ``tonemap_name``."""
+    """Per-image metrics of remodulated linear colour, after tone mapping with ``tonemap_name`` at ``exposure``
+    (see :class:`wdss.data.tonemap.ToneMap`)."""
 
     def __init__(
         self,
@@ -60,7 +61,6 @@ class ImageMetrics(nn.Module):
         exposure: float | str | None = None,
     ):
         super().__init__()
-        self.tonemap_name = tonemap_name
         self.tone = ToneMap(tonemap_name, exposure)
         self.flip = flip
         self.lpips = lpips

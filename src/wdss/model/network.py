@@ -23,6 +23,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from wdss.model.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3
+from wdss.model.joint_bilateral import joint_bilateral_upsample
 from wdss.wavelets import WaveletTransform
 
 __all__ = ["HEADS", "OUTPUT_SPACES", "RESIDUALS", "WIDTHS", "WDSSNet"]
@@ -398,8 +399,6 @@ class WDSSNet(nn.Module):
         if self.residual == "bilinear":
             up = F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
         else:
-            from wdss.model.joint_bilateral import joint_bilateral_upsample
-
             up = joint_bilateral_upsample(lr.float(), gbuffer.float())
         return F.pad(self._to_space(up), pad, mode="replicate")
 

@@ -6,26 +6,21 @@ emitters, and on ``data/mini`` the metric's tone map (Hable, exposure 10, white 
 chosen from quick probes of its first, middle and last frames, so that its median luminance is that of real
 engine frames (DFASR's Unreal sample: pre-tonemap median 0.19, tone-mapped median 0.47, 0.1 % saturated) --
 unless that would saturate more than 1 % of the probes, in which case the bright end decides, within 1.5 stops.
-The factor is recorded in
-``sequence.json`` (``exposure``) and applied to every frame and every resolution alike, so motion, history
-and demodulation stay consistent.
+The factor is recorded in ``sequence.json`` (``exposure``) and applied to every frame and every resolution
+alike, so motion, history and demodulation stay consistent.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MAX_DARKENING", "MIDDLE_GREY", "SATURATION", "SATURATED_SHARE", "auto_exposure", "luminance"]
+from wdss.data.tonemap import MIDDLE_GREY, luminance  # the median aimed at: Hable maps 0.18 to 0.46
 
-MIDDLE_GREY = 0.18  # the median luminance aimed at (Hable at exposure 10 maps it to 0.46)
+__all__ = ["MAX_DARKENING", "SATURATED_SHARE", "SATURATION", "auto_exposure"]
+
 SATURATION = 1.0  # linear value near which the metric's tone curve saturates (0.974 at 1.0; 1.0 at 1.12)
 SATURATED_SHARE = 0.01  # at most this share of colour values may lie above SATURATION after exposure...
 MAX_DARKENING = 0.35  # ...unless meeting that would darken the median below 0.35 x middle grey (1.5 stops)
-
-
-def luminance(color: np.ndarray) -> np.ndarray:
-    """Rec. 709 luminance of ``(3, H, W)`` linear colour."""
-    return 0.2126 * color[0] + 0.7152 * color[1] + 0.0722 * color[2]
 
 
 def auto_exposure(color: np.ndarray, *, middle_grey: float = MIDDLE_GREY, saturated_share: float = SATURATED_SHARE):

@@ -152,7 +152,7 @@ def render_sequence(
         "scene": spec.to_dict(),
         "frames": [{"frame": f, "camera_to_world": camera_pose(spec.camera, f).tolist()} for f in range(frames + 1)],
         "render_seconds": (previous_meta or {}).get("render_seconds", {}),
-        # The pre-exposure applied to the radiance of every frame (None until frame 0 has been rendered).
+        # The pre-exposure applied to the radiance of every frame (None until the probes have chosen it).
         "exposure": exposure if exposure != "auto" else (previous_meta or {}).get("exposure"),
     }
     _write_json(sidecar, meta)
