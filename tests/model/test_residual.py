@@ -33,9 +33,27 @@ def test_a_residual_network_starts_as_its_upsampler(transform, basis, head, spac
     bilinear = F.interpolate(data["lr"], size=size, mode="bilinear", align_corners=False)
     joint = joint_bilateral_upsample(data["lr"], data["gbuffer"])
     for residual, expected in (("bilinear", bilinear), ("joint_bilateral", joint)):
-        model = net(transform, basis, head, output_space=space, residual=residual)
-        out = forward(model, data)
-        torch.testing.assert_close(out["irradiance"], expected.clamp_min(0), atol=2e-5, rtol=2e-5)
+        for residual_input in (False, True):  # seeing the upsampled irradiance changes nothing at the start
+            model = net(transform, basis, head, output_space=space, residual=residual, residual_input=residual_input)
+            out = forward(model, data)
+            torch.testing.assert_close(out["irradiance"], expected.clamp_min(0), atol=2e-5, rtol=2e-5)
+
+
+def test_the_upsampled_irradiance_reaches_the_network_when_asked():
+    torch.manual_seed(0)
+    data = batch(size=(16, 20))
+    plain = net(residual="joint_bilateral", exit_init=1.0)
+    seeing = net(residual="joint_bilateral", exit_init=1.0, residual_input=True)
+    # Three more input channels (per phase of the unshuffled G-buffer stack) and nothing else.
+    assert seeing.gbuffer.body[0].in_channels == plain.gbuffer.body[0].in_channels + 4 * 3
+    seen = []
+    seeing.gbuffer.register_forward_hook(lambda module, args, out: seen.append(args[0]))
+    forward(seeing, data)
+    last = F.pixel_shuffle(seen[0], 2)[:, -3:]  # the G-buffer stack's last channels, back on the HR grid
+    expected = torch.log1p(joint_bilateral_upsample(data["lr"], data["gbuffer"]))  # as the LR input: log1p
+    torch.testing.assert_close(last, expected, atol=1e-5, rtol=1e-5)
+    with pytest.raises(ValueError, match="residual_input"):
+        net(residual="none", residual_input=True)
 
 
 @pytest.mark.parametrize("transform", ["dwt", "swt"])

@@ -263,6 +263,7 @@ class WDSSNet(nn.Module):
         output_space: str = "linear",
         residual: str = "none",
         exit_init: float = 0.0,
+        residual_input: bool = False,
     ) -> None:
         super().__init__()
         if output_space not in OUTPUT_SPACES:
@@ -270,6 +271,11 @@ class WDSSNet(nn.Module):
         if residual not in RESIDUALS:
             raise ValueError(f"model.residual must be one of {', '.join(RESIDUALS)}, got {residual!r}")
         self.output_space, self.residual = output_space, residual
+        if residual_input and residual == "none":
+            raise ValueError("model.residual_input needs a residual upsampler (model.residual: bilinear or joint_bilateral)")
+        # The G-buffer branch also sees the upsampled irradiance the head corrects: the correction depends on where
+        # that upsampling errs, which the network cannot see from the LR and G-buffers alone.
+        self.residual_input = bool(residual_input)
         if wavelet is not None:  # a configured transform module (conf/transform/*.yaml) names both
             if wavelet.level != 1:
                 raise ValueError(f"the network heads use one wavelet level, got level={wavelet.level}")
@@ -293,7 +299,8 @@ class WDSSNet(nn.Module):
         self.gbuffer_channels = list(gbuffer_channels) if gbuffer_channels is not None else None
         n_gbuffer = len(self.gbuffer_channels) if self.gbuffer_channels is not None else GBUFFER_CHANNELS
         self.lr = LRExtractor(lr_widths, cin=4 * RGB if lr_unshuffle else RGB)
-        self.gbuffer = GBufferExtractor(4 * (n_gbuffer + 1), gbuffer_width, gbuffer_block)
+        gbuffer_in = n_gbuffer + 1 + (RGB if self.residual_input else 0)
+        self.gbuffer = GBufferExtractor(4 * gbuffer_in, gbuffer_width, gbuffer_block)
         self.temporal_branch = TemporalExtractor(4 * (RGB + 5), temporal_widths) if temporal else None
         ll = self.half_channels // 4  # LL is the first quarter of band-major channels
         fusion_out = ll if head == "fusion_ll" else self.half_channels
@@ -351,7 +358,9 @@ class WDSSNet(nn.Module):
         guide = gbuffer  # the whole stack: a joint-bilateral residual base reads depth, normal and albedo
         if self.gbuffer_channels is not None:
             gbuffer = gbuffer[:, self.gbuffer_channels]
-        gb_in = F.pixel_unshuffle(F.pad(torch.cat([gbuffer, spatial_mask], 1), pad_hr, mode="replicate"), 2)
+        upsampled = self._upsample(lr, guide)
+        gb_stack = [gbuffer, spatial_mask] + ([self._to_input(upsampled)] if self.residual_input else [])
+        gb_in = F.pixel_unshuffle(F.pad(torch.cat(gb_stack, 1), pad_hr, mode="replicate"), 2)
         lr_fusion, lr_inr = self.lr(lr_in)
         gb_fusion, gb_inr = self.gbuffer(gb_in)
         parts = [resample_to_cells(lr_fusion, (height, width), lr.shape[-2:], lr_cell), gb_fusion]
@@ -363,7 +372,7 @@ class WDSSNet(nn.Module):
         fusion = self.fusion(torch.cat(parts, 1))
         inr = self.inr(lr_inr, gb_inr, scale, (height, width), lr.shape[-2:], lr_cell)
         merged = torch.cat([fusion, inr], 1) if self.head == "fusion_ll" else fusion + inr
-        base = self._residual_base(lr, guide, pad_hr)
+        base = None if upsampled is None else F.pad(self._to_space(upsampled), pad_hr, mode="replicate")
         coefficients: Tensor | None
         if self.transform == "none":
             image = self.exit(F.pixel_shuffle(merged, 2)).float()
@@ -392,15 +401,13 @@ class WDSSNet(nn.Module):
             return torch.expm1(image.clamp(0.0, 20.0))
         return image.clamp_min(0.0)
 
-    def _residual_base(self, lr: Tensor, gbuffer: Tensor, pad: tuple[int, int, int, int]) -> Tensor | None:
-        """The upsampled LR irradiance the head adds to, in the output space, padded like the HR/2 grid."""
+    def _upsample(self, lr: Tensor, gbuffer: Tensor) -> Tensor | None:
+        """The upsampled LR irradiance the head adds to (linear, HR size), or None without a residual."""
         if self.residual == "none":
             return None
         if self.residual == "bilinear":
-            up = F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
-        else:
-            up = joint_bilateral_upsample(lr.float(), gbuffer.float())
-        return F.pad(self._to_space(up), pad, mode="replicate")
+            return F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
+        return joint_bilateral_upsample(lr.float(), gbuffer.float())
 
     def target_coefficients(self, irradiance: Tensor) -> Tensor | None:
         """The analysis of a target irradiance ``(N, 3, H, W)`` in the space and layout of the predicted
