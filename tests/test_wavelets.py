@@ -5,6 +5,8 @@ Tolerances are relative to the largest magnitude of the reference: 1e-6 in float
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import pywt
@@ -230,3 +232,14 @@ def test_bad_arguments_are_clear_errors(call, message):
 def test_integer_input_is_rejected():
     with pytest.raises(TypeError, match="floating-point"):
         analysis(torch.ones(1, 1, 4, 4, dtype=torch.int64), transform="dwt")
+
+
+@pytest.mark.parametrize("shape", ((1, 0, 4, 4), (1, 3, 0, 4), (1, 3, 4, 0)))
+@pytest.mark.parametrize("transform", ("dwt", "swt"))
+def test_no_channels_or_no_pixels_is_a_clear_error(transform, shape):
+    message = r"needs C, H and W >= 1, got shape \(N, C, H, W\) = " + re.escape(str(shape))
+    with pytest.raises(ValueError, match=message):
+        analysis(torch.rand(shape), transform=transform)
+    with pytest.raises(ValueError, match=message):
+        WaveletTransform(transform).synthesis(torch.rand(shape))
+    assert analysis(torch.rand(0, 3, 4, 4), transform=transform).shape[0] == 0  # an empty batch stays a no-op

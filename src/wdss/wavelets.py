@@ -255,6 +255,7 @@ def _split_chunks(part: Tensor, q: int, groups: int) -> Tensor:
 
 
 def _analysis(x: Tensor, rows: Tensor, transform: str, level: int) -> Tensor:
+    _check_not_empty(x, "wavelet analysis")
     n, c, h, w = x.shape
     if transform == "dwt" and (h % 2**level or w % 2**level):
         raise ValueError(
@@ -280,6 +281,7 @@ def _analysis(x: Tensor, rows: Tensor, transform: str, level: int) -> Tensor:
 
 
 def _synthesis(coeffs: Tensor, rows: Tensor, transform: str, level: int) -> Tensor:
+    _check_not_empty(coeffs, "wavelet synthesis")
     n, total = coeffs.shape[:2]
     c = total // coefficient_channels(transform, 1, level)
     if c * coefficient_channels(transform, 1, level) != total:
@@ -328,6 +330,14 @@ def _check_input(x: Tensor, what: str) -> None:
         raise ValueError(f"{what} expects a 4-D tensor (N, C, H, W), got shape {tuple(x.shape)}")
     if not x.is_floating_point():
         raise TypeError(f"{what} expects a floating-point tensor, got {x.dtype}")
+
+
+def _check_not_empty(x: Tensor, what: str) -> None:
+    # An empty batch (N = 0) is a valid no-op; no channels or no pixels is a caller's mistake, which the
+    # convolutions would only report as an empty max() or a ZeroDivisionError.
+    n, c, h, w = x.shape
+    if c == 0 or h == 0 or w == 0:
+        raise ValueError(f"{what} needs C, H and W >= 1, got shape (N, C, H, W) = {tuple(x.shape)}")
 
 
 def _check_level(level: int) -> None:
