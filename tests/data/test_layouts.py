@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import shutil
 import zipfile
 from pathlib import Path
@@ -15,6 +16,7 @@ from wdss.data.sampling import point_sample
 from wdss.data.synthetic import synthetic_frame, write_sequence
 
 HR = (24, 36)
+FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "rendered" / "fixture_000"  # 24P is 48x24
 
 
 @pytest.fixture(scope="module", params=["unreal", "dfasr"])
@@ -157,3 +159,85 @@ def test_copy_without_low_resolution_folders_still_reads_hr(tmp_path, scene):
     seq = Sequence(copy)
     assert seq.resolutions == [24]
     assert seq.read(3, 24, ["color"])["color"].shape == (3, 24, 36)
+
+
+# Bad scene data, built from the committed fixture: each error names the file (zip and member), frame or key.
+
+
+def _fixture_copy(tmp_path: Path) -> Path:
+    return Path(shutil.copytree(FIXTURE, tmp_path / "fixture_000"))
+
+
+def _zip_of(folder: Path, archive: Path) -> Path:
+    archive.parent.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_STORED) as zf:  # stored: member bytes appear verbatim
+        for file in sorted(folder.rglob("*")):
+            zf.write(file, Path(folder.name) / file.relative_to(folder))
+    return archive
+
+
+@pytest.mark.parametrize("zipped", [False, True])
+@pytest.mark.parametrize("read_first_frame_first", [False, True])
+def test_a_frame_of_another_size_names_the_file_and_both_sizes(tmp_path, zipped, read_first_frame_first):
+    seq_dir = _fixture_copy(tmp_path / "src")
+    for file in (seq_dir / "24P").glob("*.0003.exr"):  # frame 3 rendered at 40x24 instead of 48x24
+        write_exr(file, {c: plane[:, :40] for c, plane in read_exr(file).items()})
+    seq = Sequence(_zip_of(seq_dir, tmp_path / "fixture_000.zip") if zipped else seq_dir)
+    if read_first_frame_first:
+        seq.read(1, 24, ["color"])
+    seq.read(2, 24, ["color", "depth"])  # frames of the first frame's size still read
+    with pytest.raises(
+        SceneError,
+        match=r"'fixture_000', frame 3: .*fixture_000.*24P/PretonemapMetallic.0003.exr is 40x24, but the "
+        r"sequence's first frame at 24P is 48x24 \(.*24P/PretonemapMetallic.0000.exr\)",
+    ):
+        seq.read(3, 24, ["color"])
+
+
+def test_an_exr_truncated_after_its_header_is_a_clear_error(tmp_path):
+    seq_dir = _fixture_copy(tmp_path)
+    target = seq_dir / "24P" / "PretonemapMetallic.0001.exr"
+    target.write_bytes(target.read_bytes()[: target.stat().st_size // 2])
+    seq = Sequence(seq_dir)
+    with pytest.raises(ExrError, match=r"cannot read EXR .*24P/PretonemapMetallic.0001.exr \(corrupt or truncated"):
+        seq.read(1, 24, ["color"])
+
+
+def test_a_zip_member_with_a_bad_crc_names_the_zip_and_the_member(tmp_path):
+    archive = _zip_of(FIXTURE, tmp_path / "fixture_000.zip")
+    data = bytearray(archive.read_bytes())
+    member = (FIXTURE / "24P" / "PretonemapMetallic.0001.exr").read_bytes()
+    data[data.index(member) + len(member) // 2] ^= 0xFF
+    archive.write_bytes(bytes(data))
+    seq = Sequence(archive)  # the central directory is intact: the damage shows when the member is read
+    seq.read(1, 24, ["depth"])
+    with pytest.raises(
+        SceneError,
+        match=r"cannot read member fixture_000/24P/PretonemapMetallic.0001.exr of zip .*fixture_000.zip: Bad CRC",
+    ):
+        seq.read(1, 24, ["color"])
+
+
+def test_a_truncated_zip_fails_at_discovery_naming_the_zip(tmp_path):
+    archive = _zip_of(FIXTURE, tmp_path / "root" / "fixture_000.zip")
+    archive.write_bytes(archive.read_bytes()[: archive.stat().st_size // 2])
+    with pytest.raises(SceneError, match=r"sequence .*fixture_000.zip is not a readable zip file .*truncated"):
+        discover_sequences(tmp_path / "root")
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("{ bad", r"sequence.json is not valid JSON: Expecting property name .* line 1 column 3"),
+        ('{"frames": [{"frame": 1}]}', r"sequence.json: malformed 'frames' \(KeyError: 'camera_to_world'\)"),
+        (
+            '{"frames": [{"frame": 1, "camera_to_world": [1, 2]}]}',
+            r"sequence.json: malformed .*camera_to_world of frame 1 has shape \[2\]",
+        ),
+    ],
+)
+def test_a_malformed_sequence_json_fails_at_discovery_naming_the_file(tmp_path, text, message):
+    seq_dir = _fixture_copy(tmp_path)
+    (seq_dir / "sequence.json").write_text(text)
+    with pytest.raises(SceneError, match=rf"{re.escape(str(seq_dir))}/{message}"):
+        discover_sequences(tmp_path, ["fixture_000"])

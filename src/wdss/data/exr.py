@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 
-__all__ = ["COMPRESSIONS", "ExrError", "read_exr", "write_exr"]
+__all__ = ["COMPRESSIONS", "ExrError", "read_exr", "read_exr_size", "write_exr"]
 
 COMPRESSIONS = {
     "none": OpenEXR.NO_COMPRESSION,
@@ -36,27 +36,42 @@ def read_exr(
     ``source`` is a path or the file's bytes (e.g. a zip member); ``name`` is what errors call it.
     The File API decodes the whole part; only the requested planes are converted and returned.
     """
-    label = name or str(source if not isinstance(source, bytes) else "<bytes>")
-    try:
-        if isinstance(source, bytes):
-            exr = OpenEXR.File(io.BytesIO(source), separate_channels=True)
-        else:
-            if not os.path.exists(source):
-                raise ExrError(f"EXR file not found: {label}")
-            exr = OpenEXR.File(str(source), separate_channels=True)
-        parts = exr.parts
-    except ExrError:
-        raise
-    except Exception as err:  # OpenEXR raises RuntimeError/OSError/ValueError variants for broken files
-        raise ExrError(f"cannot read EXR {label} (corrupt, truncated or not an EXR file): {err}") from err
-    if len(parts) != 1:
-        raise ExrError(f"{label} has {len(parts)} parts; wdss reads one-part EXR files")
-    available = parts[0].channels
+    label, part = _open(source, name, header_only=False)
+    available = part.channels
     wanted = list(available) if channels is None else list(channels)
     missing = [c for c in wanted if c not in available]
     if missing:
         raise ExrError(f"{label} has no channel {', '.join(missing)} (it has {', '.join(sorted(available))})")
     return {c: np.asarray(available[c].pixels, dtype=np.float32) for c in wanted}
+
+
+def read_exr_size(source: str | os.PathLike | bytes, *, name: str | None = None) -> tuple[int, int]:
+    """The ``(H, W)`` of a one-part EXR, from its header alone (no pixel data is decoded)."""
+    _, part = _open(source, name, header_only=True)
+    low, high = part.header["dataWindow"]
+    return int(high[1] - low[1] + 1), int(high[0] - low[0] + 1)
+
+
+def _open(source: str | os.PathLike | bytes, name: str | None, *, header_only: bool) -> tuple[str, OpenEXR.Part]:
+    """The label errors use and the one part of an EXR file, or an :class:`ExrError` naming the file."""
+    label = name or str(source if not isinstance(source, bytes) else "<bytes>")
+    try:
+        if isinstance(source, bytes):
+            exr = OpenEXR.File(io.BytesIO(source), separate_channels=True, header_only=header_only)
+        else:
+            if not os.path.exists(source):
+                raise ExrError(f"EXR file not found: {label}")
+            exr = OpenEXR.File(str(source), separate_channels=True, header_only=header_only)
+        parts = exr.parts
+    except ExrError:
+        raise
+    except Exception as err:  # OpenEXR raises RuntimeError/OSError/ValueError variants for broken files
+        raise ExrError(f"cannot read EXR {label} (corrupt, truncated or not an EXR file): {err}") from err
+    if not parts:  # the binding only warns about undecodable pixel data and returns no part
+        raise ExrError(f"cannot read EXR {label} (corrupt or truncated: its pixel data cannot be decoded)")
+    if len(parts) != 1:
+        raise ExrError(f"{label} has {len(parts)} parts; wdss reads one-part EXR files")
+    return label, parts[0]
 
 
 def write_exr(

@@ -26,6 +26,7 @@ import json
 import logging
 import re
 import zipfile
+import zlib
 from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -34,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from wdss.data.exr import read_exr
+from wdss.data.exr import read_exr, read_exr_size
 
 __all__ = [
     "BUFFERS",
@@ -81,7 +82,11 @@ class Slot:
 
 
 class Source:
-    """The files of one sequence, from a folder or a zip; ``opens`` counts the files read so far."""
+    """The files of one sequence, from a folder or a zip; ``opens`` counts the files whose pixels were read.
+
+    A zip that cannot be opened (truncated: no central directory) is an error here, at discovery; a member
+    that cannot be read (bad CRC, corrupt data) is one when it is read. Both name the zip (and the member).
+    """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
@@ -92,9 +97,15 @@ class Source:
                 str(p.relative_to(self.path)).replace("\\", "/") for p in self.path.rglob("*.exr") if p.is_file()
             )
             self._prefix = ""
-        elif zipfile.is_zipfile(self.path):
-            with zipfile.ZipFile(self.path) as archive:
-                names = sorted(n for n in archive.namelist() if n.endswith(".exr"))
+        elif self.path.is_file():
+            try:
+                with zipfile.ZipFile(self.path) as archive:
+                    names = sorted(n for n in archive.namelist() if n.endswith(".exr"))
+            except (zipfile.BadZipFile, EOFError) as err:
+                raise SceneError(
+                    f"sequence {self.path} is not a readable zip file ({err}): is it truncated or corrupt? "
+                    "Re-create it, or use the sequence folder"
+                ) from err
             # A zip of the sequence folder may keep that folder as its top level.
             top = {n.split("/", 1)[0] for n in names if "/" in n}
             self._prefix = f"{top.pop()}/" if len(top) == 1 and not self._has_resolution_dirs(names) else ""
@@ -118,8 +129,9 @@ class Source:
     def read_bytes(self, name: str) -> bytes:
         if self.path.is_dir():
             return (self.path / name).read_bytes()
+        # A short-lived handle: one opened here, at discovery, would be shared by forked loader workers.
         with zipfile.ZipFile(self.path) as archive:
-            return archive.read(self._prefix + name)
+            return self._member(archive, name)
 
     def read(self, name: str, channels: Iterable[str]) -> dict[str, np.ndarray]:
         self.opens += 1
@@ -127,7 +139,23 @@ class Source:
             return read_exr(self.path / name, channels, name=self.describe(name))
         if self._zip is None:
             self._zip = zipfile.ZipFile(self.path)
-        return read_exr(self._zip.read(self._prefix + name), channels, name=self.describe(name))
+        return read_exr(self._member(self._zip, name), channels, name=self.describe(name))
+
+    def size(self, name: str) -> tuple[int, int]:
+        """The ``(H, W)`` of one file, from its header (not counted in :attr:`opens`: no pixels are decoded)."""
+        if self.path.is_dir():
+            return read_exr_size(self.path / name, name=self.describe(name))
+        if self._zip is None:
+            self._zip = zipfile.ZipFile(self.path)
+        return read_exr_size(self._member(self._zip, name), name=self.describe(name))
+
+    def _member(self, archive: zipfile.ZipFile, name: str) -> bytes:
+        try:
+            return archive.read(self._prefix + name)
+        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as err:
+            raise SceneError(
+                f"cannot read member {self._prefix}{name} of zip {self.path}: {err}; the zip is corrupt, re-create it"
+            ) from err
 
     def __getstate__(self) -> dict:  # zip handles do not cross process boundaries (DataLoader workers)
         state = dict(self.__dict__)
@@ -282,7 +310,8 @@ class Sequence:
         self.hr = self.resolutions[0]
         self.frames = self.layout.frames(self._index, self.hr)
         self.sanitized: dict[str, int] = {}
-        self._cameras: dict[int, torch.Tensor] | None = None
+        self._sizes: dict[tuple[int, str], tuple[str, tuple[int, int]]] = {}  # (height, stem) -> first file, size
+        self._cameras = self._read_cameras()  # at discovery: a malformed sidecar fails before training starts
 
     def __repr__(self) -> str:
         return (
@@ -295,14 +324,30 @@ class Sequence:
 
     def camera(self, frame: int) -> torch.Tensor | None:
         """The 3x3 camera-to-world rotation of ``frame`` from the sidecar ``sequence.json``, if there is one."""
-        if self._cameras is None:
-            self._cameras = {}
-            if self.source.has("sequence.json"):
-                meta = json.loads(self.source.read_bytes("sequence.json"))
-                for entry in meta.get("frames", []):
-                    matrix = torch.tensor(entry["camera_to_world"], dtype=torch.float32)
-                    self._cameras[int(entry["frame"])] = matrix[:3, :3]
         return self._cameras.get(frame)
+
+    def _read_cameras(self) -> dict[int, torch.Tensor]:
+        if not self.source.has("sequence.json"):
+            return {}
+        where = self.source.describe("sequence.json")
+        raw = self.source.read_bytes("sequence.json")
+        try:
+            meta = json.loads(raw)
+        except ValueError as err:  # JSONDecodeError and UnicodeDecodeError
+            raise SceneError(f"{where} is not valid JSON: {err}") from err
+        cameras = {}
+        try:
+            for entry in meta.get("frames", []):
+                matrix = torch.tensor(entry["camera_to_world"], dtype=torch.float32)
+                if matrix.ndim != 2 or min(matrix.shape) < 3:
+                    raise ValueError(f"camera_to_world of frame {entry['frame']} has shape {list(matrix.shape)}")
+                cameras[int(entry["frame"])] = matrix[:3, :3]
+        except (AttributeError, KeyError, TypeError, ValueError, RuntimeError) as err:
+            raise SceneError(
+                f"{where}: malformed 'frames' ({type(err).__name__}: {err}); expected a list of "
+                "{frame: N, camera_to_world: 4x4 matrix}"
+            ) from err
+        return cameras
 
     def read(self, frame: int, height: int, buffers: Iterable[str], *, sanitize: bool = False) -> dict[str, np.ndarray]:
         """The requested buffers of one frame at one resolution, as float32 ``(C, H, W)`` arrays.
@@ -348,7 +393,27 @@ class Sequence:
         if len(set(shapes.values())) > 1:
             sizes = ", ".join(f"{self.source.describe(n)} {s[1]}x{s[0]}" for n, s in shapes.items())
             raise SceneError(f"sequence {self.name!r}, frame {frame}: buffers differ in size at {height}P: {sizes}")
+        for name, slots in by_file.items():
+            self._check_size(frame, height, slots[0][1].stem, name, shapes[name])
         return out
+
+    def _check_size(self, frame: int, height: int, stem: str, name: str, size: tuple[int, int]) -> None:
+        """A file must have the size of the same file of the sequence's first frame at its resolution.
+
+        Patches and batches of one size would otherwise hide a frame rendered at another resolution.
+        """
+        key = (height, stem)
+        if key not in self._sizes:
+            first = min(f for (h, s, f) in self._index if (h, s) == key)
+            reference = self._index[(height, stem, first)]
+            self._sizes[key] = (reference, size if reference == name else self.source.size(reference))
+        reference, expected = self._sizes[key]
+        if size != expected:
+            raise SceneError(
+                f"sequence {self.name!r}, frame {frame}: {self.source.describe(name)} is {size[1]}x{size[0]}, but "
+                f"the sequence's first frame at {height}P is {expected[1]}x{expected[0]} "
+                f"({self.source.describe(reference)}); every frame of a sequence needs one size per resolution"
+            )
 
 
 def discover_sequences(root: str | Path, names: Iterable[str] | None = None, layout: str = "auto") -> list[Sequence]:
