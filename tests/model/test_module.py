@@ -146,6 +146,15 @@ def test_a_non_finite_loss_stops_training_naming_the_batch():
         model.training_step(data, 3)
 
 
+def test_an_hdr_overflow_of_the_loss_points_at_color_max():
+    data = batch()
+    data["target"][0, :, :4, :4] = 3e38  # finite, as loading checks, but the loss overflows
+    with pytest.raises(
+        FloatingPointError, match=r"brightest target value is 3e\+38: .* data\.preprocessing\.color_max \(e\.g\. 10\)"
+    ):
+        module().training_step(data, 0)
+
+
 def test_baselines_run_through_the_same_path():
     data = batch(size=(16, 20), scale=2.0)
     for mode, demodulated in (("bilinear", False), ("bicubic", False), ("bilinear", True)):

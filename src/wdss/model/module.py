@@ -195,7 +195,11 @@ class SuperResolutionModule(L.LightningModule):
             raise FloatingPointError(
                 f"non-finite training loss at step {self.global_step} (batch {batch_idx}: sequences "
                 f"{batch.get('sequence')}, frames {batch.get('frame', torch.empty(0)).tolist()}, scale "
-                f"{float(batch['scale'][0]):.3g}): " + ", ".join(f"{k}={float(v):.4g}" for k, v in terms.items())
+                f"{float(batch['scale'][0]):.3g}): "
+                + ", ".join(f"{k}={float(v):.4g}" for k, v in terms.items())
+                # Loaded data is finite (checked per file), so the usual cause is HDR colour too bright for the loss.
+                + f"; the brightest target value is {float(batch['target'].max()):.4g}: HDR colour can overflow the "
+                "loss, clip it at load with data.preprocessing.color_max (e.g. 10)"
             )
         n = batch["target"].shape[0]
         self.log("train/loss", terms["total"], prog_bar=True, batch_size=n)
