@@ -117,7 +117,13 @@ def test_every_option_of_every_group_composes(group, tmp_path):
         (["data.test_scales=[2,9]"], r"test_scales must lie in \[1, 8\]"),
         (["loss.weights.temporal=0.3"], "needs temporal=recurrent"),
         (["ckpt_path=/no/such.ckpt"], "is not a file"),
-        (["model.optimizer._target_=os.system"], r"model.optimizer._target_=os.system is outside wdss, torch"),
+        (["model.optimizer._target_=os.system"], r"model.optimizer._target_=os.system is not on wdss's allowlist"),
+        (["model.optimizer._target_=torch.os.system"], r"model.optimizer._target_=torch.os.system is not on"),
+        (["transform._target_=torch.save"], r"transform._target_=torch.save is not on"),  # model.net.wavelet
+        (
+            ["++data.prepare={_target_: torch.load, f: evil.pkl, weights_only: false}"],
+            r"data.prepare._target_=torch.load is not on wdss's allowlist",
+        ),
     ],
 )
 def test_invalid_combinations_are_one_clear_sentence(overrides, message, tmp_path):

@@ -14,12 +14,12 @@ from typing import Any
 import hydra
 import lightning as L
 import numpy as np
-from hydra.utils import instantiate
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from wdss.data.exr import write_exr
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
+from wdss.targets import check_targets, instantiate
 from wdss.tracking import RUN_ID_FILE
 
 __all__ = ["WritePredictions", "evaluate", "main"]
@@ -59,6 +59,8 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     ckpt = Path(str(cfg.ckpt_path))
     if not ckpt.is_file():
         raise FileNotFoundError(f"ckpt_path {ckpt} is not a file")
+    # The config builds only allowlisted callables (wdss.targets); the checkpoint's are checked as it loads.
+    check_targets(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
     datamodule = instantiate(cfg.data, inputs=list(module.inputs))
     run_id = training_run_id(ckpt)

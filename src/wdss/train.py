@@ -20,11 +20,11 @@ import hydra
 import lightning as L
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
-from hydra.utils import instantiate
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 
 from wdss.paths import CONF_DIR
+from wdss.targets import TargetRefused, check_targets, instantiate
 from wdss.tracking import RUN_ID_FILE, reap_dead_runs, run_name, run_tags
 
 __all__ = ["ConfigError", "main", "train", "validate"]
@@ -34,33 +34,14 @@ class ConfigError(ValueError):
     """A configuration that cannot describe a valid run."""
 
 
-ALLOWED_TARGETS = ("wdss.", "torch.", "lightning.")
-
-
-def _targets(node: Any, path: str = "") -> list[tuple[str, str]]:
-    """Every ``_target_`` in a config (outside ``hydra``), with where it is."""
-    found = []
-    if isinstance(node, dict):
-        for key, value in node.items():
-            where = f"{path}.{key}" if path else str(key)
-            if key == "_target_":
-                found.append((path or "<root>", str(value)))
-            elif key != "hydra":
-                found += _targets(value, where)
-    elif isinstance(node, list):
-        for index, value in enumerate(node):
-            found += _targets(value, f"{path}[{index}]")
-    return found
-
-
 def validate(cfg: DictConfig) -> None:
     """Reject invalid combinations with one clear sentence each."""
     choices = HydraConfig.get().runtime.choices if HydraConfig.initialized() else {}
-    # Configs may only build objects of wdss, torch and lightning: a config file is not a way to run code.
-    plain = OmegaConf.to_container(cfg, resolve=False)
-    for where, target in _targets(plain):
-        if not target.startswith(ALLOWED_TARGETS):
-            raise ConfigError(f"{where}._target_={target} is outside wdss, torch and lightning: refused")
+    # A config builds only allowlisted callables (wdss.targets): a config file is not a way to run code.
+    try:
+        check_targets(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
+    except TargetRefused as err:
+        raise ConfigError(str(err)) from err
     transform = OmegaConf.select(cfg, "transform.transform")
     head = OmegaConf.select(cfg, "head.name")
     baseline = str(OmegaConf.select(cfg, "model.net._target_", default="")).endswith("Upsample")

@@ -13,7 +13,6 @@ from typing import Any
 
 import lightning as L
 import torch
-from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from torch import Tensor, nn
 
@@ -21,6 +20,7 @@ from wdss.data.tonemap import ToneMap
 from wdss.data.warp import warp_backward
 from wdss.model.losses import WDSSLoss
 from wdss.model.metrics import LPIPS, ImageMetrics
+from wdss.targets import check_targets, instantiate
 
 __all__ = ["SuperResolutionModule"]
 
@@ -73,11 +73,12 @@ class SuperResolutionModule(L.LightningModule):
             "tonemap_exposure": tonemap_exposure,
             "warmup_steps": int(warmup_steps),
         }
-        if isinstance(net, nn.Module):
-            self.net = net
-        else:
+        if not isinstance(net, nn.Module):
             hparams["net"] = _plain(net)
-            self.net = instantiate(hparams["net"])
+        # A checkpoint's hyper-parameters are data: refuse any target outside the allowlist before building any.
+        for key in ("net", "optimizer", "scheduler"):
+            check_targets(hparams.get(key), key)
+        self.net = net if isinstance(net, nn.Module) else instantiate(hparams["net"])
         if temporal is None:  # follow the network: a temporal branch trains on ground-truth history by default
             temporal = "gt_history" if "history" in getattr(self.net, "inputs", ()) else "none"
             hparams["temporal"] = temporal
