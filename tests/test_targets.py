@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import lightning
@@ -10,6 +11,7 @@ import torch
 from omegaconf import OmegaConf
 
 from tests.test_train import compose_train
+from wdss.checkpoint import CheckpointError, read_checkpoint
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR, PROJECT_ROOT
 from wdss.targets import TargetRefused, check_targets, instantiate
@@ -113,6 +115,8 @@ def test_a_crafted_checkpoint_builds_nothing_when_loaded(net, tmp_path):
     target = f"torch.{net}"
     with pytest.raises(TargetRefused, match=rf"^net\._target_={target} is not on wdss's allowlist"):
         SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
+    with pytest.raises(CheckpointError, match=rf"{ckpt}: hyper_parameters\.net\._target_={target} is not on"):
+        read_checkpoint(ckpt)
     assert not (tmp_path / "pwned").exists()
 
 
@@ -132,7 +136,7 @@ def test_eval_refuses_a_crafted_checkpoint_before_any_run_or_file(tmp_path, monk
     monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/mlflow.db")
     ckpt = crafted_checkpoint(tmp_path, NETS["save"](tmp_path))
     cfg = compose_train([f"ckpt_path={ckpt}", "data=fixture"], tmp_path / "eval", name="eval")
-    with pytest.raises(TargetRefused, match=r"^net\._target_=torch\.save is not on"):
+    with pytest.raises(CheckpointError, match=r"hyper_parameters\.net\._target_=torch\.save is not on"):
         evaluate(cfg)
     assert not (tmp_path / "pwned").exists() and not (tmp_path / "mlflow.db").exists()
 
@@ -144,3 +148,42 @@ def test_eval_refuses_targets_off_the_list_in_its_own_config(tmp_path):
     cfg = compose_train([f"ckpt_path={ckpt}", "data.prepare._target_=torch.load"], tmp_path / "eval", name="eval")
     with pytest.raises(TargetRefused, match=r"^data\.prepare\._target_=torch\.load is not on"):
         evaluate(cfg)
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"root:x:0:0:root:/root:/bin/bash\n", "is not a checkpoint: not a torch archive"),
+        (os.urandom(4096), "is not a checkpoint: not a torch archive"),
+        (None, r"cannot be read as a checkpoint \(UnpicklingError\)"),  # a pickle of code, in a torch archive
+    ],
+)
+def test_a_file_that_is_not_a_checkpoint_is_named_without_suggesting_weights_only_false(content, message, tmp_path):
+    from wdss.train import ConfigError, validate
+
+    ckpt = tmp_path / "model.ckpt"
+    if content is None:
+        _payload(tmp_path).rename(ckpt)
+    else:
+        ckpt.write_bytes(content)
+    with pytest.raises(ConfigError, match=rf"ckpt_path: {ckpt} {message}") as error:
+        validate(compose_train([f"ckpt_path={ckpt}"], tmp_path))
+    assert "weights_only" not in str(error.value) and not (tmp_path / "pwned").exists()
+
+
+@pytest.mark.slow
+def test_training_from_a_random_file_named_ckpt_fails_before_any_run_exists(tmp_path):
+    from tests.test_train import run_module
+
+    ckpt = tmp_path / "model.ckpt"
+    ckpt.write_bytes(os.urandom(4096))
+    done = run_module(tmp_path, "wdss.train", f"ckpt_path={ckpt}", f"paths.log_dir={tmp_path}/outputs")
+    assert done.returncode != 0
+    assert f"ckpt_path: {ckpt} is not a checkpoint" in done.stderr and "weights_only" not in done.stderr
+    outputs = {p.name for p in (tmp_path / "outputs").rglob("*")}
+    assert not outputs & {"checkpoints", "mlflow_run_id", "run_name"}, outputs
+    if (tmp_path / "mlflow.db").exists():  # the store may exist; no run in it
+        from mlflow import MlflowClient
+
+        client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
+        assert not client.search_runs([e.experiment_id for e in client.search_experiments()])

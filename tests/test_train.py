@@ -124,6 +124,13 @@ def test_every_option_of_every_group_composes(group, tmp_path):
             ["++data.prepare={_target_: torch.load, f: evil.pkl, weights_only: false}"],
             r"data.prepare._target_=torch.load is not on wdss's allowlist",
         ),
+        (["data.batch_size=abc"], r"data.batch_size must be an integer >= 1, got 'abc'"),
+        (["data.patch_size=-1"], r"data.patch_size must be an integer >= 1, got -1"),
+        (["scale=fixed", "scale.train=9"], r"scale.train must lie in \[1, 8\], got 9"),
+        (["scale=arbitrary", "scale.train=[0.5,4]"], r"scale.train must lie in \[1, 8\], got 0.5"),
+        (["scale=arbitrary", "scale.train=[4,2]"], r"scale.train takes \[low, high\] with low <= high"),
+        (["data.val_scale=0"], r"data.val_scale must lie in \[1, 8\], got 0"),
+        (["ckpt_path=/etc/passwd"], r"ckpt_path: /etc/passwd is not a checkpoint"),
     ],
 )
 def test_invalid_combinations_are_one_clear_sentence(overrides, message, tmp_path):

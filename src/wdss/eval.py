@@ -16,6 +16,7 @@ import lightning as L
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
+from wdss.checkpoint import read_checkpoint
 from wdss.data.exr import write_exr
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
@@ -57,10 +58,9 @@ def training_run_id(ckpt_path: Path) -> str | None:
 
 def evaluate(cfg: DictConfig) -> dict[str, float]:
     ckpt = Path(str(cfg.ckpt_path))
-    if not ckpt.is_file():
-        raise FileNotFoundError(f"ckpt_path {ckpt} is not a file")
-    # The config builds only allowlisted callables (wdss.targets); the checkpoint's are checked as it loads.
+    # Both the config and the checkpoint's stored model config build only allowlisted callables (wdss.targets).
     check_targets(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
+    read_checkpoint(ckpt)
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
     datamodule = instantiate(cfg.data, inputs=list(module.inputs))
     run_id = training_run_id(ckpt)

@@ -23,6 +23,7 @@ from hydra.types import RunMode
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 
+from wdss.checkpoint import CheckpointError, read_checkpoint
 from wdss.paths import CONF_DIR
 from wdss.targets import TargetRefused, check_targets, instantiate
 from wdss.tracking import RUN_ID_FILE, reap_dead_runs, run_name, run_tags
@@ -34,6 +35,30 @@ class ConfigError(ValueError):
     """A configuration that cannot describe a valid run."""
 
 
+def _check_numbers(cfg: DictConfig) -> None:
+    """Sizes are positive integers and scales lie in [1, 8]: a typo fails before any MLflow run or wdss output."""
+    for key, least, optional in (
+        ("data.batch_size", 1, False),
+        ("data.eval_batch_size", 1, False),
+        ("data.patches_per_frame", 1, False),
+        ("data.patch_size", 1, True),  # null: whole frames
+        ("data.num_workers", 0, False),
+    ):
+        value = OmegaConf.select(cfg, key, default=None)
+        if value is None and optional:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise ConfigError(f"{key} must be an integer >= {least}, got {value!r}")
+    for key in ("scale.train", "data.val_scale"):
+        value = OmegaConf.select(cfg, key)
+        values = list(value) if OmegaConf.is_list(value) else [value]
+        for number in values:
+            if isinstance(number, bool) or not isinstance(number, int | float) or not 1.0 <= number <= 8.0:
+                raise ConfigError(f"{key} must lie in [1, 8], got {number!r}")
+        if values != sorted(values):
+            raise ConfigError(f"{key} takes [low, high] with low <= high, got {values}")
+
+
 def validate(cfg: DictConfig) -> None:
     """Reject invalid combinations with one clear sentence each."""
     choices = HydraConfig.get().runtime.choices if HydraConfig.initialized() else {}
@@ -42,6 +67,7 @@ def validate(cfg: DictConfig) -> None:
         check_targets(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
     except TargetRefused as err:
         raise ConfigError(str(err)) from err
+    _check_numbers(cfg)
     transform = OmegaConf.select(cfg, "transform.transform")
     head = OmegaConf.select(cfg, "head.name")
     baseline = str(OmegaConf.select(cfg, "model.net._target_", default="")).endswith("Upsample")
@@ -71,8 +97,13 @@ def validate(cfg: DictConfig) -> None:
     temporal = OmegaConf.select(cfg, "temporal.name")
     if temporal != "recurrent" and OmegaConf.select(cfg, "loss.weights.temporal", default=0):
         raise ConfigError("loss.weights.temporal > 0 needs temporal=recurrent (consecutive outputs of the model)")
-    if cfg.get("ckpt_path") not in (None, "last") and not Path(str(cfg.ckpt_path)).is_file():
-        raise ConfigError(f"ckpt_path {cfg.ckpt_path} is not a file (use a checkpoint path or 'last')")
+    if cfg.get("ckpt_path") not in (None, "last"):
+        if not Path(str(cfg.ckpt_path)).is_file():
+            raise ConfigError(f"ckpt_path {cfg.ckpt_path} is not a file (use a checkpoint path or 'last')")
+        try:
+            read_checkpoint(str(cfg.ckpt_path))
+        except CheckpointError as err:
+            raise ConfigError(f"ckpt_path: {err}") from err
     if choices.get("transform") == "none" and choices.get("basis") not in (None, "db4"):
         pass  # the basis is ignored and tagged "n/a" (see wdss.tracking.run_tags), not an error
 

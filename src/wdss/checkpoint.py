@@ -1,0 +1,47 @@
+"""Checkpoints are data: :func:`read_checkpoint` opens one weights-only and checks it before anything uses it.
+
+A file that is not a checkpoint gets one sentence naming it, never torch's hint to retry with
+``weights_only=False`` (which would run whatever the file holds); a checkpoint whose stored model config names
+a callable outside :data:`wdss.targets.ALLOWED` is refused before any of it is built.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from wdss.targets import TargetRefused, check_targets
+
+__all__ = ["CheckpointError", "read_checkpoint"]
+
+
+class CheckpointError(ValueError):
+    """A file that is not a usable wdss checkpoint."""
+
+
+def read_checkpoint(path: str | Path) -> dict[str, Any]:
+    """The checkpoint at ``path`` (tensors memory-mapped), once it is known to be a wdss.train checkpoint whose
+    hyper-parameters build only allowlisted callables."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint {path} is not a file")
+    if not zipfile.is_zipfile(path):  # torch.save and Lightning write zip archives
+        raise CheckpointError(f"{path} is not a checkpoint: not a torch archive (a .ckpt that wdss.train writes)")
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+    except Exception as err:  # torch's own message may advise weights_only=False: never repeat it
+        raise CheckpointError(
+            f"{path} cannot be read as a checkpoint ({type(err).__name__}): it is damaged or holds objects "
+            "other than tensors and plain values, which wdss never loads"
+        ) from None
+    hparams = checkpoint.get("hyper_parameters") if isinstance(checkpoint, dict) else None
+    if not isinstance(hparams, dict) or "state_dict" not in checkpoint or "net" not in hparams:
+        raise CheckpointError(f"{path} is not a checkpoint written by wdss.train (no state_dict and model config)")
+    try:
+        check_targets(hparams, "hyper_parameters")
+    except TargetRefused as err:
+        raise CheckpointError(f"checkpoint {path}: {err}") from err
+    return checkpoint
