@@ -48,8 +48,15 @@ format: setup ## ruff: fix what can be fixed and format
 train: setup-render ## a short default training (renders data/mini on first use), tracked in MLflow
 	$(PY) -m wdss.train experiment=cpu
 
-ui: setup ## the MLflow UI on http://127.0.0.1:5000 (runs of mlflow.db)
-	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///mlflow.db --host 127.0.0.1 --port 5000
+# The store training logs to (conf/logger/mlflow.yaml): $MLFLOW_TRACKING_URI when set, else mlflow.db here.
+TRACKING_URI := $(or $(MLFLOW_TRACKING_URI),sqlite:///mlflow.db)
+
+ui: setup ## the MLflow UI on http://127.0.0.1:5000 (runs of $MLFLOW_TRACKING_URI, else mlflow.db)
+ifneq ($(filter http://% https://%,$(TRACKING_URI)),)
+	@echo "MLFLOW_TRACKING_URI is a tracking server, which serves its own UI: open $(TRACKING_URI)"
+else
+	$(VENV)/bin/mlflow ui --backend-store-uri '$(TRACKING_URI)' --host 127.0.0.1 --port 5000
+endif
 
 bench: setup ## benchmarks: wavelet transforms against ptwt, data loading, model inference
 	$(PY) -m wdss.bench wavelets

@@ -9,6 +9,7 @@ callback :class:`SweepParentRun`) and every job is nested under it.
 from __future__ import annotations
 
 import atexit
+import fcntl
 import os
 import socket
 import subprocess
@@ -20,7 +21,16 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-__all__ = ["PARENT_FILE", "RUN_ID_FILE", "SweepParentRun", "git_commit", "reap_dead_runs", "run_name", "run_tags"]
+__all__ = [
+    "PARENT_FILE",
+    "RUN_ID_FILE",
+    "SweepParentRun",
+    "git_commit",
+    "prepare_store",
+    "reap_dead_runs",
+    "run_name",
+    "run_tags",
+]
 
 PARENT_FILE = "mlflow_parent_run_id"  # in the sweep directory
 RUN_ID_FILE = "mlflow_run_id"  # in a run's output directory: lets ckpt_path=last resume the same run
@@ -97,6 +107,29 @@ def run_tags(cfg: DictConfig) -> dict[str, str]:
     return tags
 
 
+def prepare_store(tracking_uri: str) -> None:
+    """Create and migrate a SQLite tracking store once, under a lock on ``<db>.lock``, before any run uses it.
+
+    MLflow builds the schema of an empty SQLite file on first use; two processes doing that at once collide in
+    its alembic migration ("Online migration expected to match one row") and one of them dies. Under the lock
+    the first builds the schema and the others find it finished. MLflow keeps the store for the process, so
+    the logger reuses it. Other stores (an ``mlflow server``, a database) are migrated by their operator.
+    """
+    from mlflow import MlflowClient
+    from sqlalchemy.engine import make_url
+
+    if not tracking_uri.startswith("sqlite:"):
+        return
+    database = make_url(tracking_uri).database
+    if not database or database == ":memory:":
+        return
+    lock = Path(f"{database}.lock")
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    with lock.open("a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)  # released when the file closes
+        MlflowClient(tracking_uri)  # opens the store: creates and migrates the schema if the file is new
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -133,6 +166,7 @@ class SweepParentRun(Callback):
         from mlflow import MlflowClient
 
         uri = _tracking_uri(config)
+        prepare_store(uri)
         client = MlflowClient(uri)
         name = str(OmegaConf.select(config, "experiment_name", default="wdss"))
         experiment = client.get_experiment_by_name(name)

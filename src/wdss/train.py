@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 from wdss.checkpoint import CheckpointError, read_checkpoint
 from wdss.paths import CONF_DIR
 from wdss.targets import TargetRefused, check_targets, instantiate
-from wdss.tracking import RUN_ID_FILE, reap_dead_runs, run_name, run_tags
+from wdss.tracking import RUN_ID_FILE, prepare_store, reap_dead_runs, run_name, run_tags
 
 __all__ = ["ConfigError", "main", "train", "validate"]
 
@@ -172,6 +172,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     name = run_name(cfg)
     uri = OmegaConf.select(cfg, "logger.tracking_uri")
     if uri:
+        prepare_store(uri)
         reap_dead_runs(uri, str(cfg.experiment_name))
     tags = run_tags(cfg)
     if hasattr(module.net, "needs_training"):  # which weights a pretrained-capable baseline reports with
