@@ -27,7 +27,20 @@ OVERRIDES = [
 ]
 
 
-def run(tmp_path: Path, *extra: str, kill: int | None = None) -> subprocess.CompletedProcess | int:
+def last_epoch(tmp_path: Path) -> int | None:
+    """The epoch that a run's last.ckpt holds, or None before there is one."""
+    import torch
+
+    found = list((tmp_path / "outputs").glob("runs/*/checkpoints/last.ckpt"))
+    try:
+        return int(torch.load(found[0], map_location="cpu", weights_only=True)["epoch"]) if found else None
+    except (OSError, RuntimeError):  # Lightning moves a whole file into place, but a poll may land on the move
+        return None
+
+
+def run(
+    tmp_path: Path, *extra: str, kill: int | None = None, after_epoch: int = 0
+) -> subprocess.CompletedProcess | int:
     env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db", "MLFLOW_DISABLE_TELEMETRY": "true"}
     command = [
         sys.executable,
@@ -45,6 +58,9 @@ def run(tmp_path: Path, *extra: str, kill: int | None = None) -> subprocess.Comp
     while not list((tmp_path / "outputs").glob("runs/*/checkpoints/last.ckpt")):  # killed after epoch 0 or later
         assert process.poll() is None and time.time() < deadline, "training ended before it could be killed"
         time.sleep(0.02)
+    while after_epoch and (last_epoch(tmp_path) or 0) < after_epoch:
+        assert process.poll() is None and time.time() < deadline, f"no last.ckpt of epoch {after_epoch} or later"
+        time.sleep(0.1)
     process.send_signal(kill)
     return process.wait(timeout=120)
 
@@ -90,3 +106,20 @@ def test_a_run_killed_without_a_chance_to_report_is_marked_killed(tmp_path):
     other = run(tmp_path, "variant=none")  # ...until the next training on this machine looks
     assert other.returncode == 0, other.stderr[-2000:]
     assert client.get_run(killed.info.run_id).info.status == "KILLED"
+
+
+def test_sigkill_after_non_improving_epochs_resumes_from_the_last_epoch(tmp_path):
+    """lr=0: val/psnr never improves after epoch 0, yet last.ckpt follows every epoch and the resume starts
+    after the epoch it holds (2 steps per epoch at experiment=smoke), nothing trained twice."""
+    frozen = ("model.optimizer.lr=0", "trainer.max_epochs=60")
+    assert run(tmp_path, *frozen, kill=signal.SIGKILL, after_epoch=2) == -signal.SIGKILL
+    [checkpoints] = (tmp_path / "outputs").glob("runs/*/checkpoints")
+    assert sorted(p.name for p in checkpoints.iterdir()) == ["epoch000.ckpt", "last.ckpt"]  # the best is epoch 0
+    saved = last_epoch(tmp_path)
+    assert saved >= 2
+    started_ms = time.time() * 1000
+    resumed = run(tmp_path, *frozen[:1], "ckpt_path=last", f"trainer.max_epochs={saved + 2}")
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    client, [only] = runs(tmp_path)
+    history = client.get_metric_history(only.info.run_id, "train/loss")
+    assert sorted(m.step for m in history if m.timestamp >= started_ms) == [2 * saved + 2, 2 * saved + 3]

@@ -230,6 +230,100 @@ def test_resume_from_last_continues_the_same_run(tmp_path, tracking):
     assert steps == [0, 1, 2, 3]  # steps 0-1 from the first run, 2-3 after resuming: nothing trained twice
 
 
+def test_runs_started_in_the_same_second_get_folders_of_their_own(monkeypatch):
+    import datetime
+
+    import hydra.core.utils
+
+    class Frozen(datetime.datetime):  # Hydra's ${now:} sees one instant for both runs
+        @classmethod
+        def now(cls, tz=None):
+            return cls(2025, 1, 2, 3, 4, 5)
+
+    monkeypatch.setattr(hydra.core.utils, "datetime", Frozen)
+    first, second = (compose_train(["experiment=smoke"]) for _ in range(2))
+    for key in ("run", "sweep"):
+        folders = {str(OmegaConf.select(cfg, f"hydra.{key}.dir")) for cfg in (first, second)}
+        assert len(folders) == 2 and all("2025-01-02_03-04-05_" in folder for folder in folders), folders
+
+
+def fake_run(log_dir: Path, folder: str, name: str, started: float, checkpointed: float) -> Path:
+    """A run folder as wdss.train leaves it: its name and MLflow id (written at the start) and a last.ckpt."""
+    run_dir = log_dir / "runs" / folder
+    (run_dir / "checkpoints").mkdir(parents=True)
+    (run_dir / "run_name").write_text(name)
+    (run_dir / "mlflow_run_id").write_text(f"id-{folder}")
+    (run_dir / "checkpoints" / "last.ckpt").write_bytes(b"")
+    os.utime(run_dir / "run_name", (started, started))
+    os.utime(run_dir / "checkpoints" / "last.ckpt", (checkpointed, checkpointed))
+    return run_dir / "checkpoints" / "last.ckpt"
+
+
+def test_ckpt_path_last_refuses_runs_of_one_name_that_trained_at_the_same_time(tmp_path):
+    from wdss.train import _resume
+
+    cfg = compose_train(["experiment=smoke", "ckpt_path=last"], tmp_path)
+    name = "experiment=smoke"
+    earlier = fake_run(tmp_path, "a", name, started=1000, checkpointed=1100)
+    later = fake_run(tmp_path, "b", name, started=2000, checkpointed=2100)
+    fake_run(tmp_path, "c", "experiment=smoke,seed=1", started=3000, checkpointed=3100)  # another configuration
+    assert _resume(cfg) == (str(later), "id-b")  # one after the other: the newest is the one started last
+    os.utime(earlier, (2050, 2050))  # a still checkpointed after b started: both trained at once
+    with pytest.raises(ConfigError, match="ckpt_path=last is ambiguous: 2 runs named 'experiment=smoke'") as err:
+        _resume(cfg)
+    assert f"{later} (MLflow run id-b)" in str(err.value) and f"{earlier} (MLflow run id-a)" in str(err.value)
+
+
+def test_last_ckpt_is_written_every_epoch_and_when_sigterm_lands_in_validation(tmp_path, tracking, monkeypatch):
+    """lr=0: val/psnr never improves after epoch 0, so only an every-epoch last.ckpt can hold epoch 1."""
+    import signal
+
+    import torch
+
+    from wdss.model.module import SuperResolutionModule
+
+    validation_step = SuperResolutionModule.validation_step
+
+    def sigterm_in_epoch_1(self, batch, batch_idx):
+        if self.current_epoch == 1:
+            os.kill(os.getpid(), signal.SIGTERM)  # Lightning notes it and stops once the epoch has ended
+        return validation_step(self, batch, batch_idx)
+
+    monkeypatch.setattr(SuperResolutionModule, "validation_step", sigterm_in_epoch_1)
+    overrides = ["experiment=smoke", "trainer.max_epochs=4", "model.optimizer.lr=0", "test=false", "bench=null"]
+    with pytest.raises(SystemExit) as stop:
+        train(compose_train(overrides, tmp_path))
+    assert stop.value.code == 128 + signal.SIGTERM
+    checkpoints = tmp_path / "run" / "checkpoints"
+    assert sorted(p.name for p in checkpoints.iterdir()) == ["epoch000.ckpt", "last.ckpt"]  # epoch 1: no better
+    assert torch.load(checkpoints / "last.ckpt", weights_only=True)["epoch"] == 1
+
+
+def test_ctrl_c_ends_the_run_killed_with_the_resume_hint(tmp_path, tracking, monkeypatch, capsys):
+    import signal
+
+    from wdss.model.module import SuperResolutionModule
+
+    training_step = SuperResolutionModule.training_step
+
+    def ctrl_c_at_step_3(self, batch, batch_idx):
+        if self.global_step == 3:
+            os.kill(os.getpid(), signal.SIGINT)  # Python raises KeyboardInterrupt here
+        return training_step(self, batch, batch_idx)
+
+    monkeypatch.setattr(SuperResolutionModule, "training_step", ctrl_c_at_step_3)
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)  # whatever the shell gave this process
+    try:
+        with pytest.raises(SystemExit) as stop:
+            train(compose_train(["experiment=smoke", "trainer.max_epochs=3", "test=false", "bench=null"], tmp_path))
+    finally:
+        signal.signal(signal.SIGINT, handler)  # Lightning ignores further Ctrl-C while it shuts down
+    assert stop.value.code == 128 + signal.SIGINT
+    assert "stopped by SIGINT; resume with ckpt_path=last" in capsys.readouterr().out
+    [run] = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
+    assert run.info.status == "KILLED"
+
+
 @pytest.mark.slow
 def test_a_tiny_sweep_nests_its_runs_survives_a_failing_job_and_reports(tmp_path):
     """4 jobs, one of which fails (a patch larger than the frame): the others finish, the report marks it."""

@@ -109,27 +109,42 @@ def validate(cfg: DictConfig) -> None:
 
 
 def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
-    """``ckpt_path=last``: the newest ``last.ckpt`` of a run with the same name, and that run's MLflow id."""
+    """``ckpt_path=last``: the ``last.ckpt`` of the newest run with the same name, and that run's MLflow id.
+
+    The newest run is the one started last (its ``run_name`` file is written at the start). Runs of that name
+    still checkpointing after it started trained at the same time: then no run is "the newest", and guessing
+    would resume one run's weights into another's record, so the choice is refused, listing them.
+    """
     if cfg.get("ckpt_path") != "last":
         return (str(cfg.ckpt_path) if cfg.get("ckpt_path") else None), None
     name = run_name(cfg)
     log_dir = Path(str(cfg.paths.log_dir))
-    candidates = []
-    for ckpt in log_dir.glob("**/checkpoints/last.ckpt"):
-        run_dir = ckpt.parent.parent
-        if _recorded_name(run_dir) == name:
-            candidates.append((ckpt.stat().st_mtime, ckpt, run_dir))
+    candidates = sorted(
+        ((ckpt.parent.parent / "run_name").stat().st_mtime, ckpt)
+        for ckpt in log_dir.glob("**/checkpoints/last.ckpt")
+        if _recorded(ckpt.parent.parent, "run_name") == name
+    )
     if not candidates:
         print(f"wdss.train: no last.ckpt of a run named {name!r} under {log_dir}: starting from scratch")
         return None, None
-    _, ckpt, run_dir = max(candidates)
-    run_id = (run_dir / RUN_ID_FILE).read_text().strip() if (run_dir / RUN_ID_FILE).exists() else None
+    started, ckpt = candidates[-1]
+    concurrent = [other for _, other in candidates[:-1] if other.stat().st_mtime > started]
+    if concurrent:
+        listing = "\n".join(
+            f"  {path} (MLflow run {_recorded(path.parent.parent, RUN_ID_FILE)})" for path in [ckpt, *concurrent]
+        )
+        raise ConfigError(
+            f"ckpt_path=last is ambiguous: {len(concurrent) + 1} runs named {name!r} trained at the same time:\n"
+            f"{listing}\nresume one of them with ckpt_path=PATH"
+        )
+    run_id = _recorded(ckpt.parent.parent, RUN_ID_FILE)
     print(f"wdss.train: resuming {ckpt}" + (f" in MLflow run {run_id}" if run_id else ""))
     return str(ckpt), run_id
 
 
-def _recorded_name(run_dir: Path) -> str | None:
-    file = run_dir / "run_name"
+def _recorded(run_dir: Path, name: str) -> str | None:
+    """What a run folder recorded at its start (``run_name``, ``mlflow_run_id``), if it did."""
+    file = run_dir / name
     return file.read_text().strip() if file.exists() else None
 
 
@@ -207,14 +222,27 @@ def train(cfg: DictConfig) -> dict[str, float]:
             trainer.test(module, datamodule=datamodule, ckpt_path=best or None, weights_only=True)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")})
         metrics.update(_bench(cfg, module, logger))
-    except SIGTERMException as stop:  # Lightning stops cleanly on SIGTERM, as a SystemExit with status 0
+    except BaseException as error:
+        stopped_by = _stopped_by(error)
+        if stopped_by is None:
+            logger.finalize("FAILED")
+            raise
         logger.finalize("KILLED")
-        print(f"wdss.train: stopped by SIGTERM; resume with ckpt_path=last (checkpoints in {output_dir})")
-        raise SystemExit(128 + signal.SIGTERM) from stop
-    except BaseException:
-        logger.finalize("FAILED")
-        raise
+        print(f"wdss.train: stopped by {stopped_by.name}; resume with ckpt_path=last (checkpoints in {output_dir})")
+        raise SystemExit(128 + stopped_by) from error
     return metrics
+
+
+def _stopped_by(error: BaseException) -> signal.Signals | None:
+    """The signal that stopped a run on purpose: SIGTERM (Lightning finishes the step, then raises
+    SIGTERMException) or SIGINT (Ctrl-C: a KeyboardInterrupt, which Lightning turns into ``sys.exit(1)``)."""
+    if isinstance(error, SIGTERMException):
+        return signal.SIGTERM
+    if isinstance(error, KeyboardInterrupt) or (
+        isinstance(error, SystemExit) and isinstance(error.__context__, KeyboardInterrupt)
+    ):
+        return signal.SIGINT
+    return None
 
 
 def _bench(cfg: DictConfig, module: Any, logger: Any) -> dict[str, float]:
