@@ -359,30 +359,70 @@ def test_a_tiny_sweep_nests_its_runs_survives_a_failing_job_and_reports(tmp_path
     }
 
 
-def test_eval_rebuilds_from_the_checkpoint_and_logs_into_the_training_run(tmp_path, tracking):
+def eval_config(ckpt: Path, out: Path, *overrides: str):
+    return compose_train(
+        [f"ckpt_path={ckpt}", "data=fixture", "bench.height=48", "bench.width=96", "bench.repeats=1", *overrides],
+        out,
+        name="eval",
+    )
+
+
+def test_eval_rebuilds_from_the_checkpoint_and_logs_under_the_training_run(tmp_path, tracking):
     from wdss.eval import evaluate
 
     train(compose_train(["experiment=smoke", "variant=dwt_haar", "test=false"], tmp_path))
     ckpt = tmp_path / "run" / "checkpoints" / "last.ckpt"
-    cfg = compose_train(
-        [
-            f"ckpt_path={ckpt}",
-            "data=fixture",
-            "data.test_scales=[2.0,2.5]",
-            "write_outputs=true",
-            "bench.height=48",
-            "bench.width=96",
-            "bench.repeats=1",
-        ],
-        tmp_path / "eval",
-        name="eval",
-    )
-    metrics = evaluate(cfg)
+    [trained] = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
+    metrics = evaluate(eval_config(ckpt, tmp_path / "eval", "data.test_scales=[2.0,2.5]", "write_outputs=true"))
     assert {"test/psnr_2x", "test/psnr_2.5x", "bench/ms_per_frame"} <= set(metrics)
-    runs = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
-    assert len(runs) == 1 and "test/psnr_2.5x" in runs[0].data.metrics
+    [evaluation] = tracking.search_runs(
+        [trained.info.experiment_id], f"tags.mlflow.parentRunId = '{trained.info.run_id}'"
+    )
+    assert evaluation.info.status == "FINISHED" and "test/psnr_2.5x" in evaluation.data.metrics
+    assert evaluation.data.tags["ckpt_path"] == str(ckpt.resolve())
+    assert tracking.get_run(trained.info.run_id).info == trained.info  # status and end time as training left them
     frames = sorted(p.name for p in (tmp_path / "eval" / "run" / "frames").iterdir())
     assert "fixture_000_0001_2.5x.exr" in frames and "fixture_000_0001_2.5x.png" in frames
+
+
+def test_a_failed_eval_leaves_the_training_run_as_it_was(tmp_path, tracking, monkeypatch):
+    from wdss.eval import evaluate
+    from wdss.model.module import SuperResolutionModule
+
+    train(compose_train(["experiment=smoke", "variant=dwt_haar", "test=false", "bench=null"], tmp_path))
+    [trained] = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
+
+    def broken(self, batch, batch_idx, dataloader_idx=0):
+        raise RuntimeError("evaluation broke")
+
+    monkeypatch.setattr(SuperResolutionModule, "test_step", broken)
+    with pytest.raises(RuntimeError, match="evaluation broke"):
+        evaluate(eval_config(tmp_path / "run" / "checkpoints" / "last.ckpt", tmp_path / "eval"))
+    assert tracking.get_run(trained.info.run_id).info == trained.info  # still FINISHED, same end time
+    [evaluation] = tracking.search_runs(
+        [trained.info.experiment_id], f"tags.mlflow.parentRunId = '{trained.info.run_id}'"
+    )
+    assert evaluation.info.status == "FAILED"
+
+
+def test_eval_against_a_store_without_the_training_run_makes_a_tagged_run(tmp_path, tracking, monkeypatch, capsys):
+    from mlflow import MlflowClient
+
+    from wdss.eval import evaluate
+
+    train(compose_train(["experiment=smoke", "variant=dwt_haar", "test=false", "bench=null"], tmp_path))
+    [trained] = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
+    other = f"sqlite:///{tmp_path}/other.db"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", other)
+    ckpt = tmp_path / "run" / "checkpoints" / "last.ckpt"
+    evaluate(eval_config(ckpt, tmp_path / "eval"))
+    assert f"the training run {trained.info.run_id} of {ckpt} is not in {other}" in capsys.readouterr().out
+    client = MlflowClient(other)
+    [evaluation] = client.search_runs([client.get_experiment_by_name("wdss").experiment_id])
+    assert evaluation.info.status == "FINISHED" and "test/psnr_2x" in evaluation.data.metrics
+    tags = evaluation.data.tags
+    assert tags["training_run_id"] == trained.info.run_id and tags["ckpt_path"] == str(ckpt.resolve())
+    assert "mlflow.parentRunId" not in tags
 
 
 def test_ema_weight_averaging_runs(tmp_path, tracking):

@@ -1,9 +1,9 @@
 """Evaluation entry point: ``python -m wdss.eval ckpt_path=PATH [data=...] [write_outputs=true]``.
 
 Rebuilds the model from the checkpoint alone (``weights_only=True``), tests it on full frames of every test
-scene at every scale of ``data.test_scales``, logs the metrics and the inference cost into the MLflow run
-that trained it (found beside the checkpoint), and optionally writes every prediction as linear EXR and
-tone-mapped PNG.
+scene at every scale of ``data.test_scales``, logs the metrics and the inference cost into an MLflow run of
+its own (nested under the run that trained it, found beside the checkpoint, when the tracking store has it),
+and optionally writes every prediction as linear EXR and tone-mapped PNG.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from wdss.data.exr import write_exr
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
 from wdss.targets import check_targets, instantiate
-from wdss.tracking import RUN_ID_FILE
+from wdss.tracking import RUN_ID_FILE, prepare_store
 
 __all__ = ["WritePredictions", "evaluate", "main"]
 
@@ -56,6 +56,43 @@ def training_run_id(ckpt_path: Path) -> str | None:
     return file.read_text().strip() if file.exists() else None
 
 
+def _eval_logger(cfg: DictConfig, ckpt: Path) -> Any:
+    """A logger with a run of its own for this evaluation, so that its status and end time are its own.
+
+    Nested under the run that trained the checkpoint when this tracking store has it (that record keeps its
+    status and end time, whatever the evaluation does); otherwise a top-level run, tagged with the checkpoint
+    and the id of its training run, and the user is told why.
+    """
+    from mlflow import MlflowClient
+    from mlflow.exceptions import MlflowException
+    from mlflow.protos.databricks_pb2 import RESOURCE_DOES_NOT_EXIST, ErrorCode
+
+    uri = str(cfg.logger.tracking_uri)
+    prepare_store(uri)
+    client = MlflowClient(uri)
+    training = training_run_id(ckpt)
+    tags = {"ckpt_path": str(ckpt.resolve())}
+    experiment_name = str(cfg.experiment_name)
+    if training is None:
+        folder = ckpt.resolve().parent.parent
+        print(f"wdss.eval: no {RUN_ID_FILE} in {folder}: the training run of {ckpt} is unknown, logging a new run")
+    else:
+        tags["training_run_id"] = training
+        try:
+            run = client.get_run(training)
+        except MlflowException as err:
+            if err.error_code != ErrorCode.Name(RESOURCE_DOES_NOT_EXIST):
+                raise
+            print(
+                f"wdss.eval: the training run {training} of {ckpt} is not in {uri}: logging a new run tagged "
+                f"training_run_id={training} and ckpt_path"
+            )
+        else:
+            tags["mlflow.parentRunId"] = training
+            experiment_name = client.get_experiment(run.info.experiment_id).name  # the UI nests within one
+    return instantiate(cfg.logger, experiment_name=experiment_name, run_name=f"eval {ckpt.name}", tags=tags)
+
+
 def evaluate(cfg: DictConfig) -> dict[str, float]:
     ckpt = Path(str(cfg.ckpt_path))
     # Both the config and the checkpoint's stored model config build only allowlisted callables (wdss.targets).
@@ -63,17 +100,20 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     read_checkpoint(ckpt)
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
     datamodule = instantiate(cfg.data, inputs=list(module.inputs))
-    run_id = training_run_id(ckpt)
-    logger = instantiate(cfg.logger, run_id=run_id, run_name=None if run_id else f"eval {ckpt.name}")
+    logger = _eval_logger(cfg, ckpt)
     callbacks = []
     if cfg.get("write_outputs"):
         callbacks.append(WritePredictions(Path(str(cfg.paths.output_dir)) / "frames"))
     trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks, enable_checkpointing=False)
-    trainer.test(module, datamodule=datamodule)
-    metrics = {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")}
     from wdss.train import _bench
 
-    metrics.update(_bench(cfg, module, logger))
+    try:
+        trainer.test(module, datamodule=datamodule)
+        metrics = {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")}
+        metrics.update(_bench(cfg, module, logger))
+    except BaseException:
+        logger.finalize("FAILED")  # the evaluation's own run; the training run is never touched
+        raise
     print(f"wdss.eval: {ckpt} -> MLflow run {logger.run_id}")
     for key in sorted(metrics):
         print(f"  {key} = {metrics[key]:.4g}")
