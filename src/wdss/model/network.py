@@ -272,7 +272,9 @@ class WDSSNet(nn.Module):
             raise ValueError(f"model.residual must be one of {', '.join(RESIDUALS)}, got {residual!r}")
         self.output_space, self.residual = output_space, residual
         if residual_input and residual == "none":
-            raise ValueError("model.residual_input needs a residual upsampler (model.residual: bilinear or joint_bilateral)")
+            raise ValueError(
+                "model.residual_input needs a residual upsampler (model.residual: bilinear or joint_bilateral)"
+            )
         # The G-buffer branch also sees the upsampled irradiance the head corrects: the correction depends on where
         # that upsampling errs, which the network cannot see from the LR and G-buffers alone.
         self.residual_input = bool(residual_input)
