@@ -118,6 +118,15 @@ def test_loss_spaces_map_every_image_term():
         WDSSLoss({"l1": 1.0}, space="srgb")
 
 
+def test_l2_is_the_mean_squared_error_in_the_loss_space():
+    torch.manual_seed(0)
+    output, target = torch.rand(2, 3, 8, 8) * 4, torch.rand(2, 3, 8, 8) * 4
+    for space, f in (("linear", lambda x: x), ("log", torch.log1p), ("tonemapped", hable)):
+        terms = WDSSLoss({"l2": 2.0}, space=space)(output, target)
+        torch.testing.assert_close(terms["l2"], ((f(output) - f(target)) ** 2).mean())
+        torch.testing.assert_close(terms["total"], 2.0 * terms["l2"])
+
+
 def test_masked_l1_is_a_mean_over_the_mask():
     output, target = torch.zeros(1, 3, 8, 8), torch.zeros(1, 3, 8, 8)
     mask = torch.zeros(1, 1, 8, 8)

@@ -4,7 +4,8 @@ The image terms compare colour in one space: ``linear`` HDR (the paper), ``log``
 ``tonemapped`` (the metric's display transform, so the loss weighs errors as PSNR/SSIM/FLIP will).
 Terms: ``wavelet`` (L1 between predicted coefficients and the analysis of the target irradiance, in the space
 the network's head predicts in: see ``WDSSNet.target_coefficients``),
-``l1``, ``ssim`` (1 - SSIM), ``masked_l1`` (L1 inside the spatial mask), ``temporal`` (the change between
+``l1``, ``l2`` (mean squared error: its minimiser is the conditional mean, what PSNR rewards; L1's is the median,
+which is the upsampler itself wherever the correction is small against the target's sampling noise), ``ssim`` (1 - SSIM), ``masked_l1`` (L1 inside the spatial mask), ``temporal`` (the change between
 consecutive outputs against the change between consecutive targets, both previous frames warped; it needs
 the previous prediction and does not collapse to plain L1), ``lpips`` (only with local backbone weights).
 """
@@ -22,7 +23,7 @@ from wdss.data.tonemap import ToneMap
 
 __all__ = ["LOSS_SPACES", "LOSS_TERMS", "WDSSLoss", "temporal_difference_loss"]
 
-LOSS_TERMS = ("wavelet", "l1", "ssim", "masked_l1", "temporal", "lpips")
+LOSS_TERMS = ("wavelet", "l1", "l2", "ssim", "masked_l1", "temporal", "lpips")
 LOSS_SPACES = ("linear", "log", "tonemapped")
 
 
@@ -82,6 +83,8 @@ class WDSSLoss(nn.Module):
         w = self.weights
         if "l1" in w:
             terms["l1"] = F.l1_loss(output, target)
+        if "l2" in w:
+            terms["l2"] = F.mse_loss(output, target)
         if "ssim" in w:
             # SSIM's constants assume a known data range: 1 for display values, the target's range otherwise.
             data_range = 1.0 if self.space == "tonemapped" else float(target.detach().amax().clamp_min(1.0))
