@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import zipfile
@@ -12,6 +13,7 @@ import pytest
 import torch
 
 from wdss.data import BUFFERS, ExrError, SceneError, Sequence, discover_sequences, read_exr, write_exr
+from wdss.data.layouts import DEFAULT_FRAME_RATE
 from wdss.data.sampling import point_sample
 from wdss.data.synthetic import synthetic_frame, write_sequence
 
@@ -234,6 +236,7 @@ def test_a_truncated_zip_fails_at_discovery_naming_the_zip(tmp_path):
             '{"frames": [{"frame": 1, "camera_to_world": [1, 2]}]}',
             r"sequence.json: malformed .*camera_to_world of frame 1 has shape \[2\]",
         ),
+        ('{"fps": "fast"}', r"sequence.json: 'fps' must be a number of frames per second, got 'fast'"),
     ],
 )
 def test_a_malformed_sequence_json_fails_at_discovery_naming_the_file(tmp_path, text, message):
@@ -241,3 +244,11 @@ def test_a_malformed_sequence_json_fails_at_discovery_naming_the_file(tmp_path, 
     (seq_dir / "sequence.json").write_text(text)
     with pytest.raises(SceneError, match=rf"{re.escape(str(seq_dir))}/{message}"):
         discover_sequences(tmp_path, ["fixture_000"])
+
+
+def test_the_frame_rate_comes_from_sequence_json_else_the_default(tmp_path):
+    seq_dir = _fixture_copy(tmp_path)
+    assert Sequence(seq_dir).frame_rate == DEFAULT_FRAME_RATE == 30.0  # the fixture's sidecar says nothing
+    meta = json.loads((seq_dir / "sequence.json").read_text())
+    (seq_dir / "sequence.json").write_text(json.dumps({**meta, "fps": 59.94}))
+    assert Sequence(seq_dir).frame_rate == 59.94

@@ -39,6 +39,7 @@ from wdss.data.exr import read_exr, read_exr_size
 
 __all__ = [
     "BUFFERS",
+    "DEFAULT_FRAME_RATE",
     "DFASRLayout",
     "SceneError",
     "SceneLayout",
@@ -46,6 +47,10 @@ __all__ = [
     "UnrealLayout",
     "discover_sequences",
 ]
+
+# Frames per second of a sequence whose sequence.json does not say (wdss's renderer steps per frame, not per
+# second): the floor of real-time rendering, for videos.
+DEFAULT_FRAME_RATE = 30.0
 
 BUFFERS: dict[str, int] = {
     "color": 3,
@@ -311,7 +316,8 @@ class Sequence:
         self.frames = self.layout.frames(self._index, self.hr)
         self.sanitized: dict[str, int] = {}
         self._sizes: dict[tuple[int, str], tuple[str, tuple[int, int]]] = {}  # (height, stem) -> first file, size
-        self._cameras = self._read_cameras()  # at discovery: a malformed sidecar fails before training starts
+        # At discovery: a malformed sidecar fails before training starts.
+        self._cameras, self.frame_rate = self._read_sidecar()
 
     def __repr__(self) -> str:
         return (
@@ -326,9 +332,11 @@ class Sequence:
         """The 3x3 camera-to-world rotation of ``frame`` from the sidecar ``sequence.json``, if there is one."""
         return self._cameras.get(frame)
 
-    def _read_cameras(self) -> dict[int, torch.Tensor]:
+    def _read_sidecar(self) -> tuple[dict[int, torch.Tensor], float]:
+        """Camera rotations by frame and the frame rate (``fps``, default :data:`DEFAULT_FRAME_RATE`) of
+        ``sequence.json``."""
         if not self.source.has("sequence.json"):
-            return {}
+            return {}, DEFAULT_FRAME_RATE
         where = self.source.describe("sequence.json")
         raw = self.source.read_bytes("sequence.json")
         try:
@@ -347,7 +355,10 @@ class Sequence:
                 f"{where}: malformed 'frames' ({type(err).__name__}: {err}); expected a list of "
                 "{frame: N, camera_to_world: 4x4 matrix}"
             ) from err
-        return cameras
+        fps = meta.get("fps", DEFAULT_FRAME_RATE)
+        if isinstance(fps, bool) or not isinstance(fps, int | float) or not 0 < fps <= 1000:
+            raise SceneError(f"{where}: 'fps' must be a number of frames per second, got {fps!r}")
+        return cameras, float(fps)
 
     def read(self, frame: int, height: int, buffers: Iterable[str], *, sanitize: bool = False) -> dict[str, np.ndarray]:
         """The requested buffers of one frame at one resolution, as float32 ``(C, H, W)`` arrays.
