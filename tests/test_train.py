@@ -385,6 +385,37 @@ def test_eval_rebuilds_from_the_checkpoint_and_logs_under_the_training_run(tmp_p
     assert "fixture_000_0001_2.5x.exr" in frames and "fixture_000_0001_2.5x.png" in frames
 
 
+def test_eval_logs_temporal_metrics_per_frame_histories_and_videos_of_each_test_sequence(tmp_path, tracking):
+    import av
+
+    from wdss.eval import evaluate
+
+    train(compose_train(["experiment=smoke", "variant=dwt_haar", "test=false", "bench=null"], tmp_path))
+    ckpt = tmp_path / "run" / "checkpoints" / "last.ckpt"
+    config = eval_config(ckpt, tmp_path / "eval", "data.test_scales=[2.0]", "bench=null", "video=true")
+    with open_dict(config):
+        config.trainer.limit_test_batches = None  # every frame of the sequence, in order
+    metrics = evaluate(config)
+    assert metrics["test/twe_2x"] > 0 and metrics["test/twe_ratio_2x"] > 0 and metrics["test/tpsnr_2x"] > 0
+    [evaluation] = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id], "tags.ckpt_path != ''")
+    run_id = evaluation.info.run_id
+    assert {"test/twe_2x", "test/twe_target_2x", "test/twe_ratio_2x", "test/tpsnr_2x"} <= set(evaluation.data.metrics)
+    # The temporal model skips the fixture's first frame (no history): frames 1-4, the PSNR of each by frame index.
+    history = tracking.get_metric_history(run_id, "frames/fixture_000/psnr_2x")
+    assert sorted(m.step for m in history) == [1, 2, 3, 4]
+    assert {"test/pred_2x.png", "test/pred_2x_t1.png", "test/pred_2x_t2.png"} <= {
+        a.path for a in tracking.list_artifacts(run_id, "test")
+    }
+    videos = {a.path for a in tracking.list_artifacts(run_id, "videos")}
+    assert videos == {"videos/fixture_000_2x.mp4", "videos/fixture_000_2x_crop.gif"}
+    mp4 = tracking.download_artifacts(run_id, "videos/fixture_000_2x.mp4", str(tmp_path))
+    with av.open(mp4) as container:
+        frames = [frame.to_ndarray(format="rgb24") for frame in container.decode(video=0)]
+        assert container.streams.video[0].codec_context.name == "h264"
+    # Four 96x48 tiles (LR | prediction | target | error) under a 14-pixel label strip, one frame per test frame.
+    assert len(frames) == 4 and frames[0].shape == (48 + 14, 4 * 96, 3)
+
+
 def test_a_failed_eval_leaves_the_training_run_as_it_was(tmp_path, tracking, monkeypatch):
     from wdss.eval import evaluate
     from wdss.model.module import SuperResolutionModule

@@ -1,9 +1,10 @@
-"""Evaluation entry point: ``python -m wdss.eval ckpt_path=PATH [data=...] [write_outputs=true]``.
+"""Evaluation entry point: ``python -m wdss.eval ckpt_path=PATH [data=...] [write_outputs=true] [video=true]``.
 
 Rebuilds the model from the checkpoint alone (``weights_only=True``), tests it on full frames of every test
 scene at every scale of ``data.test_scales``, logs the metrics and the inference cost into an MLflow run of
 its own (nested under the run that trained it, found beside the checkpoint, when the tracking store has it),
-and optionally writes every prediction as linear EXR and tone-mapped PNG.
+and optionally writes every prediction as linear EXR and tone-mapped PNG, and every test sequence as video
+(:mod:`wdss.video`).
 """
 
 from __future__ import annotations
@@ -99,11 +100,15 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     check_targets(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
     read_checkpoint(ckpt)
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
-    datamodule = instantiate(cfg.data, inputs=list(module.inputs))
+    datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
     logger = _eval_logger(cfg, ckpt)
     callbacks = []
     if cfg.get("write_outputs"):
         callbacks.append(WritePredictions(Path(str(cfg.paths.output_dir)) / "frames"))
+    if cfg.get("video"):
+        from wdss.video import SequenceVideos
+
+        callbacks.append(SequenceVideos(Path(str(cfg.paths.output_dir)) / "videos"))
     trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks, enable_checkpointing=False)
     from wdss.train import _bench
 

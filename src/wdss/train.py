@@ -183,7 +183,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
             f"{type(module.net).__name__} has no weights: set model.net.weights to the published file, or train it "
             "on these frames (fit=true); numbers from random weights are never reported"
         )
-    datamodule = instantiate(cfg.data, inputs=list(module.inputs))
+    datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
     name = run_name(cfg)
     uri = OmegaConf.select(cfg, "logger.tracking_uri")
     if uri:
@@ -198,6 +198,10 @@ def train(cfg: DictConfig) -> dict[str, float]:
     (output_dir / "run_name").write_text(name)
     (output_dir / RUN_ID_FILE).write_text(logger.run_id)
     callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [_progress_bar()]
+    if cfg.get("video") and cfg.get("test"):
+        from wdss.video import SequenceVideos
+
+        callbacks.append(SequenceVideos(output_dir / "videos"))
     trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks)
 
     resolved = OmegaConf.to_container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]), resolve=True)

@@ -191,6 +191,24 @@ def test_configuration_errors_are_clear(root):
         dm.setup("fit")
 
 
+def test_the_test_split_reads_its_own_keys_and_keeps_every_frame(root):
+    """The temporal metrics need motion and G-buffer at test time only; current-frame keys drop no frame."""
+    splits = {"train": ["seq_a"], "test": ["seq_a"]}
+    dm = SceneDataModule(
+        root,
+        splits,
+        ["lr", "target"],
+        test_inputs=["lr", "target", "motion", "gbuffer"],
+        test_scales=[2.0],
+        patch_size=16,
+    )
+    dm.setup(None)
+    train = next(iter(dm.train_dataloader()))
+    test = next(iter(dm.test_dataloader()[0]))
+    assert {"motion", "gbuffer"} & set(train) == set() and {"motion", "gbuffer", "lr", "target"} <= set(test)
+    assert [frame for _, frame in dm.datasets["test"][0].items] == [1, 2, 3, 4]
+
+
 def test_frame_ranges_and_split_entries(root):
     dm = SceneDataModule(
         root, {"train": [{"name": "seq_a", "frames": [2, 4]}]}, ["target"], patch_size=None, batch_size=1

@@ -67,7 +67,8 @@ def _parse_split(entries: Iterable[Any]) -> tuple[list[str], dict[str, tuple[int
 class SceneDataModule(L.LightningDataModule):
     """Train/val/test splits of rendered sequences, by sequence name (see the module docstring for keys).
 
-    ``inputs`` are the batch keys the model consumes (the model config declares them). ``scale`` is a fixed
+    ``inputs`` are the batch keys the model consumes (the model config declares them); ``test_inputs`` those of
+    the test split, when it needs more (the temporal metrics: motion and G-buffer). ``scale`` is a fixed
     training scale or a ``[low, high]`` range sampled per batch; validation runs full frames at
     ``val_scale`` and testing at every scale of ``test_scales`` (one dataloader each). ``patches_per_frame``
     random patches of every training frame make one epoch. ``prepare`` is called
@@ -96,6 +97,7 @@ class SceneDataModule(L.LightningDataModule):
         sequence_length: int = 1,
         seed: int = 0,
         prepare: Callable[[Path], None] | None = None,
+        test_inputs: Iterable[str] | None = None,
     ) -> None:
         super().__init__()
         self.root = Path(root)
@@ -104,6 +106,7 @@ class SceneDataModule(L.LightningDataModule):
             raise ValueError(f"data.splits has unknown split(s) {sorted(unknown)}: expected train, val, test")
         self.splits = {name: _parse_split(entries) for name, entries in splits.items()}
         self.inputs = tuple(inputs)
+        self.test_inputs = self.inputs if test_inputs is None else tuple(test_inputs)
         self.layout = layout
         self.scale = tuple(float(s) for s in scale) if isinstance(scale, Iterable) else float(scale)
         if isinstance(self.scale, tuple) and len(self.scale) != 2:
@@ -145,7 +148,7 @@ class SceneDataModule(L.LightningDataModule):
         sequences, ranges = self._sequences(split)
         return FrameDataset(
             sequences,
-            self.inputs,
+            self.test_inputs if split == "test" else self.inputs,
             scale=scale,
             patch=patch,
             preprocessing=self.prep,
@@ -177,7 +180,7 @@ class SceneDataModule(L.LightningDataModule):
             num_workers=self.num_workers,
             pin_memory=self.pin_memory,
             persistent_workers=self.num_workers > 0,
-            collate_fn=Collate(self.inputs, self.prep, dataset.scale),
+            collate_fn=Collate(dataset.keys, self.prep, dataset.scale),
             generator=generator,
         )
 

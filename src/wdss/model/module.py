@@ -20,6 +20,7 @@ from wdss.data.tonemap import ToneMap
 from wdss.data.warp import warp_backward
 from wdss.model.losses import WDSSLoss
 from wdss.model.metrics import LPIPS, ImageMetrics
+from wdss.model.temporal_metrics import TemporalStability
 from wdss.targets import check_targets, instantiate
 
 __all__ = ["SuperResolutionModule"]
@@ -94,6 +95,8 @@ class SuperResolutionModule(L.LightningModule):
         self.temporal = temporal
         self._check_temporal()
         self._state: tuple[str, int, Tensor] | None = None  # recurrent evaluation: the last output, by frame
+        self._stability: dict[str, TemporalStability] = {}  # test: temporal metrics by scale label
+        self._shown: dict[str, tuple[str, int]] = {}  # test: the first sequence of each scale, frames logged
 
     def _check_temporal(self) -> None:
         if self.temporal not in ("gt_history", "recurrent", "none"):
@@ -120,6 +123,11 @@ class SuperResolutionModule(L.LightningModule):
         if self.temporal == "recurrent":  # the history is the model's own previous output, warped
             keys = (keys - {"history"}) | {"motion"}
         return tuple(sorted(keys))
+
+    @property
+    def test_inputs(self) -> tuple[str, ...]:
+        """Batch keys of the test split: :attr:`inputs`, and what the temporal metrics warp and mask with."""
+        return tuple(sorted(set(self.inputs) | {"motion", "gbuffer"}))
 
     def forward(self, batch: Mapping[str, Any]) -> dict[str, Tensor | None]:
         # Pass the batch tensors the network's forward names (inputs, and scale or brdf where it takes them).
@@ -248,15 +256,68 @@ class SuperResolutionModule(L.LightningModule):
         ):
             self._log_images(batch, out)
 
+    def on_test_epoch_start(self) -> None:
+        self._stability, self._shown = {}, {}
+
     def test_step(self, batch: Mapping[str, Any], batch_idx: int, dataloader_idx: int = 0) -> dict[str, Tensor]:
+        """Per-frame metrics; the temporal ones accumulate over each sequence, whose frames arrive in order."""
         label = f"{float(batch['scale'][0]):g}x"
         out = self._evaluate(batch, "test", f"_{label}")  # MLflow forbids '@' in metric names
-        if batch_idx == 0:  # the first test frame of every scale, for the report's qualitative figure
-            target = batch["target"][:1].float()
-            shown = out["display"] if out.get("display") is not None else self.tone(out["color"][:1].float(), target)
-            self._log_frame(shown[:1].float(), f"test/pred_{label}.png")
-            self._log_frame(self.tone(target, target), f"test/target_{label}.png")
-        return {"color": out["color"].detach()} if out.get("color") is not None else {}
+        target = batch["target"].float()
+        display = out.get("display")
+        shown = (display if display is not None else self.tone(out["color"].float(), target)).detach().float()
+        shown_target = self.tone(target, target)
+        stability = self._stability.setdefault(label, TemporalStability())
+        for index, sequence in enumerate(batch["sequence"]):
+            frame = int(batch["frame"][index])
+            if "motion" in batch and "gbuffer" in batch:
+                one = slice(index, index + 1)
+                stability.update(
+                    sequence, frame, shown[one], shown_target[one], batch["motion"][one], batch["gbuffer"][one]
+                )
+            # The first three frames of every scale's first sequence, for the report's qualitative figure.
+            first, logged = self._shown.setdefault(label, (sequence, 0))
+            if sequence == first and logged < 3:
+                suffix = f"_t{logged}" if logged else ""
+                self._log_frame(shown[index : index + 1], f"test/pred_{label}{suffix}.png")
+                self._log_frame(shown_target[index : index + 1], f"test/target_{label}{suffix}.png")
+                self._shown[label] = (first, logged + 1)
+        result = {"shown": shown}  # the tone-mapped prediction, for videos
+        if out.get("color") is not None:
+            result["color"] = out["color"].detach()
+        return result
+
+    def on_test_epoch_end(self) -> None:
+        """Log the temporal metrics of every scale (means over sequences) and, per sequence, each frame's PSNR and
+        warping error as MLflow metric histories ``frames/<sequence>/psnr_<s>x`` with the frame index as step."""
+        for label, stability in self._stability.items():
+            for name, value in stability.compute().items():
+                self.log(f"test/{name}_{label}", value, add_dataloader_idx=False)
+            self._log_frame_metrics(label, stability)
+
+    def _log_frame_metrics(self, label: str, stability: TemporalStability) -> None:
+        experiment, run_id = getattr(self.logger, "experiment", None), getattr(self.logger, "run_id", None)
+        if experiment is None or run_id is None or not hasattr(experiment, "log_batch"):
+            return
+        import math
+        import re
+        import time
+
+        from mlflow.entities import Metric
+
+        now = int(time.time() * 1000)
+        metrics = []
+        for sequence in stability.sequences:
+            key = re.sub(r"[^\w\-. ]", "_", sequence)  # the characters MLflow allows in metric names
+            for frame, psnr, twe, twe_target in stability.frames(sequence):
+                values = {"psnr": psnr, "twe": twe, "twe_target": twe_target}
+                metrics += [
+                    Metric(f"frames/{key}/{name}_{label}", value, now, frame)
+                    for name, value in values.items()
+                    if math.isfinite(value)
+                ]
+        for start in range(0, len(metrics), 1000):  # MLflow's limit per batch
+            experiment.log_batch(run_id, metrics=metrics[start : start + 1000])
 
     def _log_frame(self, image: Tensor, artifact_file: str) -> None:
         experiment, run_id = getattr(self.logger, "experiment", None), getattr(self.logger, "run_id", None)
