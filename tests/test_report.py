@@ -178,3 +178,35 @@ def test_the_table_scale_follows_the_sweep():
     assert table_scale("methods", ["2x", "3x"], "2x") == "2x"
     with pytest.raises(SystemExit, match="no test metrics at '5x'"):
         table_scale("methods", ["2x", "3x"], "5x")
+
+
+def test_temporal_columns_the_per_frame_psnr_plot_and_three_frames_of_the_crop(tmp_path):
+    from mlflow import MlflowClient
+    from PIL import Image
+
+    ratios = {"bicubic": 0.80, "swt_db4": 1.08, "dfasr": 1.30}  # bicubic: smoother than the truth (blur)
+    jobs = [
+        ({"variant": variant, "seed": "0"}, {"test/psnr_3x": 28.0, "test/twe_ratio_3x": r, "test/tpsnr_3x": 30 + r})
+        for variant, r in ratios.items()
+    ]
+    uri = fake_sweep(tmp_path, "methods", [(job, metrics, "FINISHED") for job, metrics in jobs])
+    client = MlflowClient(uri)
+    runs = client.search_runs([client.get_experiment_by_name("methods").experiment_id], "tags.variant != ''")
+    rng = np.random.default_rng(0)
+    for run in runs:
+        for frame in range(1, 6):
+            for sequence in ("test_000", "test_001"):
+                client.log_metric(run.info.run_id, f"frames/{sequence}/psnr_3x", 28 + frame / 10, step=frame)
+        for suffix in ("", "_t1", "_t2"):
+            for kind in ("pred", "target"):
+                image = rng.integers(0, 255, (120, 200, 3), dtype=np.uint8)
+                client.log_image(run.info.run_id, image, artifact_file=f"test/{kind}_3x{suffix}.png")
+    out = report("methods", tracking_uri=uri, out_dir=tmp_path / "reports")
+    header, rows = body((out / "table.md").read_text())
+    assert header == ["Configuration", "PSNR ↑", "tWE / target's →1", "tPSNR ↑", "n"]
+    assert rows["SWT-db4"][1] == "**1.080 ± n/a**"  # the ratio closest to 1 is best, not the lowest
+    assert rows["Bicubic"][1] == "0.800 ± n/a" and rows["DFASR"][2] == "**31.30 ± n/a**"
+    assert "tWE / target's: the mean change between consecutive frames" in (out / "table.md").read_text()
+    assert (out / "frames.png").stat().st_size > 0
+    # A row per frame (t, t+1, t+2) of the 96-pixel crop: three times the height of the one-frame figure.
+    assert Image.open(out / "qualitative.png").size[1] > 800

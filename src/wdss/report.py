@@ -5,13 +5,16 @@ Reads the jobs of a sweep (the runs nested under its parent run) and writes, int
 
 * ``table.md``: one compact table as the paper prints it: a row per configuration (the sweep's axes other than
   the seed, named as the paper names its rows: ``SWT-db4``, ``No wavelet``, ``Bilinear (demod.)``), PSNR, SSIM,
-  FLIP (and LPIPS when logged) at the table's scale, each ``mean ± half-width`` of the 95% t-interval over the
-  ``n`` seeds (``n/a`` with one seed), the best of each column in bold; a cell whose jobs failed says so
-  instead of disappearing;
+  FLIP (and LPIPS when logged) and the temporal stability (the warping error's ratio to the target's own, best
+  closest to 1, and the temporal PSNR; :mod:`wdss.model.temporal_metrics`) at the table's scale, each
+  ``mean ± half-width`` of the 95% t-interval over the ``n`` seeds (``n/a`` with one seed), the best of each
+  column in bold; a cell whose jobs failed says so instead of disappearing;
 * ``table.csv``: every metric at every scale and their average over scales, as mean, 95% half-width and n;
 * ``tradeoff.png``: PSNR and FLIP against ms/frame and against GFLOPs, the Pareto front marked, with the
   training wall-clock per configuration beside it;
-* ``qualitative.png``: the same crop of the first test frame from every configuration and the target.
+* ``qualitative.png``: the same crop of the first three test frames from every configuration and the target;
+* ``frames.png``: PSNR against frame index over the first test sequence, a line per configuration (the mean over
+  its seeds), so that the drift of recurrent models shows.
 """
 
 from __future__ import annotations
@@ -30,13 +33,15 @@ from pathlib import Path
 
 __all__ = ["collect", "main", "report"]
 
-# The compact table's columns: metric, heading, decimals, higher is better. Cost columns stand in for the
-# quality ones in a sweep that tests nothing (the runtime figure).
+# The compact table's columns: metric, heading, decimals, higher is better (None: closest to 1 is, for a ratio to
+# the ground truth). Cost columns stand in for the quality ones in a sweep that tests nothing (the runtime figure).
 QUALITY = (
     ("psnr", "PSNR", 2, True),
     ("ssim", "SSIM", 4, True),
     ("flip", "FLIP", 4, False),
     ("lpips", "LPIPS", 4, False),
+    ("twe_ratio", "tWE / target's", 3, None),
+    ("tpsnr", "tPSNR", 2, True),
 )
 COST = (
     ("bench/ms_per_frame", "ms/frame", 1, False),
@@ -212,6 +217,14 @@ def _scale_words(scale: str, scales: Sequence[str]) -> str:
     return f"mean of {'/'.join(scales)}" if scale == "avg" else scale
 
 
+_ARROWS = {True: "↑", False: "↓", None: "→1"}
+TEMPORAL_NOTE = (
+    "\ntWE / target's: the mean change between consecutive frames after warping by the motion vectors, over the "
+    "target's own (1: as stable as the ground truth; above: flicker the target does not have; below: smoother than "
+    "the truth). tPSNR: PSNR of the frame differences against the target's.\n"
+)
+
+
 def compact_columns(metrics, scale: str, scales: Sequence[str]) -> list[tuple[str, str, int, bool]]:
     """(metric key, heading, decimals, higher is better) of the compact table, only what the runs logged."""
 
@@ -219,7 +232,7 @@ def compact_columns(metrics, scale: str, scales: Sequence[str]) -> list[tuple[st
         return any(key in m for m in metrics.values())
 
     columns = [
-        (f"test/{name}_{scale}", f"{heading} {'↑' if higher else '↓'}", decimals, higher)
+        (f"test/{name}_{scale}", f"{heading} {_ARROWS[higher]}", decimals, higher)
         for name, heading, decimals, higher in QUALITY
         if logged(f"test/{name}_{scale}")
     ]
@@ -235,6 +248,13 @@ def _fixed(value: float, decimals: int) -> str:
     if value > 0 and round(value, decimals) == 0:
         decimals = 1 - math.floor(math.log10(value))
     return f"{value:.{decimals}f}"
+
+
+def _score(value: float, higher: bool | None) -> float:
+    """Larger is better: the value, its negative, or (a ratio to the ground truth's) minus its log distance to 1."""
+    if higher is None:
+        return -abs(math.log(value)) if value > 0 else -math.inf
+    return value if higher else -value
 
 
 def compact_table(rows: Sequence[str], metrics, notes: dict[str, str], columns, scales: Sequence[str]) -> str:
@@ -254,9 +274,10 @@ def compact_table(rows: Sequence[str], metrics, notes: dict[str, str], columns, 
                 cells[row].append(f"{mean:.{decimals}f} ± {half_text}")
                 means[row] = round(mean, decimals)
         if len(means) > 1:  # bold the best shown value, ties included
-            best = max(means.values()) if higher else min(means.values())
-            for row, mean in means.items():
-                if mean == best:
+            score = {row: _score(mean, higher) for row, mean in means.items()}
+            best = max(score.values())
+            for row, value in score.items():
+                if value == best:
                     cells[row][-1] = f"**{cells[row][-1]}**"
     with_notes = any(notes.get(row) for row in rows)
     header = ["Configuration", *(heading for _, heading, _, _ in columns), "n", *(["note"] if with_notes else [])]
@@ -372,41 +393,99 @@ def tradeoff_plot(rows, metrics, path: Path, scale: str) -> None:
     plt.close(fig)
 
 
-def qualitative_figure(client, groups: dict[str, list], path: Path, scale: str, crop: int = 96) -> bool:
-    """The same crop of the first test frame from one run of every row, and the target."""
+def qualitative_figure(client, groups: dict[str, list], path: Path, scale: str) -> bool:
+    """The same centre crop (the videos' crop, :data:`wdss.video.CROP`) of the first three test frames of one run
+    of every row and of the target: a column per configuration, a row per frame (old runs: the first frame only)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from PIL import Image
 
-    images, target = {}, None
+    from wdss.video import centre_box
+
+    suffixes = ("", "_t1", "_t2")  # frames t, t+1, t+2 (wdss.model.module.SuperResolutionModule.test_step)
+    images: dict[str, list] = {}
+    target: list = []
     with tempfile.TemporaryDirectory() as tmp:
         for row, runs in groups.items():
             run = next((r for r in runs if r.info.status == "FINISHED"), None)
             if run is None:
                 continue
-            try:
-                pred = client.download_artifacts(run.info.run_id, f"test/pred_{scale}.png", tmp)
-                images[row] = Image.open(pred).convert("RGB").copy()
-                if target is None:
-                    ref = client.download_artifacts(run.info.run_id, f"test/target_{scale}.png", tmp)
-                    target = Image.open(ref).convert("RGB").copy()
-            except Exception:  # a run without test images (bench-only, or failed before testing)
-                continue
-    if not images or target is None:
+            frames, references = [], []
+            for suffix in suffixes:
+                try:
+                    pred = client.download_artifacts(run.info.run_id, f"test/pred_{scale}{suffix}.png", tmp)
+                    frames.append(Image.open(pred).convert("RGB").copy())
+                    if not target:
+                        ref = client.download_artifacts(run.info.run_id, f"test/target_{scale}{suffix}.png", tmp)
+                        references.append(Image.open(ref).convert("RGB").copy())
+                except Exception:  # fewer frames (an older run), or none (bench-only, failed before testing)
+                    break
+            if frames:
+                images[row] = frames
+                target = target or references
+    if not images or not target:
         return False
-    width, height = target.size
-    size = min(crop, width, height)
-    box = ((width - size) // 2, (height - size) // 2, (width - size) // 2 + size, (height - size) // 2 + size)
+    count = min(len(target), *(len(frames) for frames in images.values()))
+    width, height = target[0].size
+    top, left, side = centre_box(height, width)
+    box = (left, top, left + side, top + side)
     panels = [*images.items(), ("target", target)]
-    fig, axes = plt.subplots(1, len(panels), figsize=(2.4 * len(panels), 2.8))
-    for ax, (label, image) in zip(list(axes) if len(panels) > 1 else [axes], panels, strict=True):
-        ax.imshow(image.crop(box), interpolation="nearest")
-        ax.set_title(label, fontsize=8)
-        ax.axis("off")
+    fig, axes = plt.subplots(count, len(panels), figsize=(2.4 * len(panels), 2.5 * count + 0.3), squeeze=False)
+    for column, (label, frames) in enumerate(panels):
+        for t in range(count):
+            ax = axes[t, column]
+            ax.imshow(frames[t].crop(box), interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if t == 0:
+                ax.set_title(label, fontsize=8)
+            if column == 0:
+                ax.set_ylabel(f"frame t{f'+{t}' if t else ''}", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return True
+
+
+def frames_plot(client, groups: dict[str, list], path: Path, scale: str) -> bool:
+    """PSNR against frame index over the first test sequence (by name), a line per row: the mean over its
+    finished runs of the ``frames/<sequence>/psnr_<scale>`` histories that the test logs."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    suffix = f"/psnr_{scale}"
+    keys = sorted(
+        key
+        for runs in groups.values()
+        for run in runs
+        for key in run.data.metrics
+        if key.startswith("frames/") and key.endswith(suffix)
+    )
+    if not keys:
+        return False
+    key = keys[0]
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for row, runs in groups.items():
+        by_frame: dict[int, list[float]] = defaultdict(list)
+        for run in runs:
+            if run.info.status == "FINISHED" and key in run.data.metrics:
+                for metric in client.get_metric_history(run.info.run_id, key):
+                    by_frame[metric.step].append(metric.value)
+        if by_frame:
+            frames = sorted(by_frame)
+            ax.plot(frames, [statistics.fmean(by_frame[f]) for f in frames], marker=".", label=row)
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.set_xlabel("frame")
+    ax.set_ylabel(f"PSNR (dB) @ {scale}")
+    ax.set_title(f"per-frame PSNR, test sequence {key.split('/')[1]}", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
     plt.close(fig)
     return True
 
@@ -444,6 +523,7 @@ def report(
         + "mean ± half-width of the 95% t-interval over n seeds (n/a with one seed); the best of each column in bold."
         + "\n\n"
         + compact_table(rows, metrics, notes, columns, scales)
+        + (TEMPORAL_NOTE if any("twe_ratio" in key or "tpsnr" in key for key, *_ in columns) else "")
         + f"\nMetrics on tone-mapped output: {metric_path(runs)}. {len(runs)} runs ({counts}); "
         + f"parent run {parent_run.info.run_id}; every metric at every scale in table.csv.\n"
     )
@@ -454,6 +534,7 @@ def report(
     plot_scale = shown if shown in scales or not scales else ("2x" if "2x" in scales else scales[0])
     tradeoff_plot(rows, metrics, out / "tradeoff.png", shown)  # "avg" plots the means over scales
     qualitative_figure(client, groups, out / "qualitative.png", plot_scale)
+    frames_plot(client, groups, out / "frames.png", plot_scale)
     client.log_artifacts(parent_run.info.run_id, str(out), "report")
     print(markdown)
     print(f"wdss.report: wrote {out} (also logged on run {parent_run.info.run_id})")
