@@ -131,6 +131,10 @@ def _circular_pad(x: Tensor, top: int, bottom: int, left: int, right: int) -> Te
         cols = torch.arange(-left, width + right, device=x.device) % width
         wrapped = x.index_select(-2, rows).index_select(-1, cols)
         return wrapped.contiguous(memory_format=torch.channels_last)
+    if torch.compiler.is_exporting():
+        # Out-of-place slices: an exporter folds the in-place writes below into a frame-sized constant (ONNX).
+        x = torch.cat([x[..., height - top :, :], x, x[..., :bottom, :]], dim=-2)
+        return torch.cat([x[..., width - left :], x, x[..., :right]], dim=-1)
     out = torch.empty(
         (n, c, height + top + bottom, width + left + right),
         dtype=x.dtype,
