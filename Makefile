@@ -15,17 +15,17 @@ help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | sort | \
 		awk 'BEGIN {FS = ":.*## "}; {printf "  \033[36m%-14s\033[0m %s\n", $$1, $$2}'
 
-setup: $(VENV)/.installed ## create .venv and install wdss with its dev tools (pytest, ruff)
+setup: $(VENV)/.installed ## create .venv and install wdss with its dev tools (pytest, ruff) and ONNX export
 
 $(VENV)/.installed: pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PIP_INSTALL) -e '.[dev]'
+	$(PIP_INSTALL) -e '.[dev,export]'
 	touch $@
 
 setup-render: $(VENV)/.installed-render ## also install Blender's bpy (the `render` extra, ~400 MB)
 
 $(VENV)/.installed-render: $(VENV)/.installed
-	$(PIP_INSTALL) -e '.[dev,render]'
+	$(PIP_INSTALL) -e '.[dev,export,render]'
 	touch $@
 
 data: setup-render ## render the default dataset (data/mini, a few minutes) ahead of training
