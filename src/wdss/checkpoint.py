@@ -12,10 +12,11 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from omegaconf import OmegaConf
 
 from wdss.targets import TargetRefused, check_targets
 
-__all__ = ["CheckpointError", "read_checkpoint"]
+__all__ = ["CheckpointError", "read_checkpoint", "training_preprocessing"]
 
 
 class CheckpointError(ValueError):
@@ -45,3 +46,14 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     except TargetRefused as err:
         raise CheckpointError(f"checkpoint {path}: {err}") from err
     return checkpoint
+
+
+def training_preprocessing(path: str | Path) -> dict[str, Any]:
+    """``data.preprocessing`` of the run that wrote the checkpoint at ``path`` (``<run>/checkpoints/x.ckpt``
+    beside ``<run>/.hydra/config.yaml``), or ``{}`` when it is not in a run folder: a model sees its inputs
+    demodulated, clamped and normalised as in training, whatever the defaults are now."""
+    config = Path(path).resolve().parent.parent / ".hydra" / "config.yaml"
+    if not config.is_file():
+        return {}
+    node = OmegaConf.select(OmegaConf.load(config), "data.preprocessing")
+    return dict(OmegaConf.to_container(node, resolve=True)) if node is not None else {}

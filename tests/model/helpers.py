@@ -42,3 +42,38 @@ def losses_over_steps(module, data: dict, steps: int = 2) -> list[float]:
         terms["total"].backward()
         optimizer.step()
     return losses
+
+
+def tiny_checkpoint(path, *overrides: str):
+    """A checkpoint at ``path`` of a tiny, randomly initialised model of ``wdss.train``'s config with ``overrides``
+    (e.g. ``variant=dfasr``), written as training writes one (``Trainer.save_checkpoint``)."""
+    import lightning as L
+
+    from tests.test_train import compose_train
+    from wdss.targets import instantiate
+
+    widths = [
+        f"size.wdss.{k}=[{','.join(map(str, v))}]" if isinstance(v, tuple) else f"size.wdss.{k}={v}"
+        for k, v in TINY.items()
+    ]
+    cfg = compose_train([*overrides, *widths])
+    torch.manual_seed(0)
+    module = instantiate(cfg.model, tonemap_exposure=None)
+    trainer = L.Trainer(logger=False, enable_checkpointing=False, enable_progress_bar=False, enable_model_summary=False)
+    trainer.strategy.connect(module)
+    trainer.save_checkpoint(path)
+    return path
+
+
+def fixture_batches(keys, scale: float = 2.0, root=None) -> list[dict]:
+    """Batches of one frame each, in order, of the committed fixture sequence (or the sequence at ``root``), read
+    through wdss's data path with the default preprocessing (a frame without a previous one has zero history)."""
+    from wdss.data.dataset import Collate, FrameDataset, Preprocessing
+    from wdss.data.layouts import Sequence
+    from wdss.paths import PROJECT_ROOT
+
+    sequence = Sequence(root or PROJECT_ROOT / "tests" / "fixtures" / "rendered" / "fixture_000")
+    prep = Preprocessing()
+    dataset = FrameDataset([sequence], keys, scale=scale, patch=None, preprocessing=prep, first_frame="zeros")
+    collate = Collate(dataset.keys, prep, scale)
+    return [collate([dataset[index]]) for index in range(len(dataset))]

@@ -1,0 +1,323 @@
+"""Export entry point: ``python -m wdss.export ckpt_path=PATH [format=onnx] [height=1080 width=1920 scale=2]
+[dynamic=true] [fp16=true]``.
+
+Writes the model a checkpoint holds as one ONNX graph (opset >= 17) for an engine: the whole network, wavelet
+synthesis included, with its RIR blocks folded into their 3x3 convolutions first, and the remodulation by the BRDF
+factor, so that the graph maps the inputs an engine can compute to the HR colour. Inputs are named by their batch
+keys (:mod:`wdss.data.datamodule`), ``scale`` among them; outputs are ``color`` (linear HDR) and ``irradiance``
+(the demodulated prediction, which a recurrent model feeds back). Beside it, ``<name>.json`` describes the input
+layout an engine must feed: channels and their order, resolution, demodulation, what the graph applies itself
+(log1p), the radiance's exposure and, for a recurrent model, how to make its history. onnxruntime then checks the
+graph against torch on the example inputs.
+"""
+
+from __future__ import annotations
+
+import copy
+import inspect
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import hydra
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from torch import Tensor, nn
+
+from wdss.checkpoint import read_checkpoint, training_preprocessing
+from wdss.data.dataset import GBUFFER_STACK, Preprocessing
+from wdss.data.sampling import lr_size
+from wdss.model.blocks import RIRBlock
+from wdss.model.module import SuperResolutionModule
+from wdss.model.profile import dummy_inputs
+from wdss.paths import CONF_DIR
+
+__all__ = ["ExportError", "InferenceGraph", "export", "export_onnx", "fold", "input_layout", "main"]
+
+MIN_OPSET = 17
+OUTPUTS = ("color", "irradiance")
+# Most a graph may differ from torch on the example inputs (max |difference| / max |torch output|).
+TOLERANCE = {"float32": 1e-4, "float16": 1e-2}
+
+_RGB = ("r", "g", "b")
+_XYZ = ("x", "y", "z")
+
+
+def _channels(buffer: str) -> list[str]:
+    names = {"base_color": _RGB, "normal": _XYZ, "motion": ("x", "y")}.get(buffer)
+    return [f"{buffer}.{c}" for c in names] if names else [buffer]
+
+
+# Engine-facing description of every batch key a graph may take: resolution (high or low), channels in order,
+# meaning. The one contract between data and model (wdss.data.datamodule), written out for another renderer.
+CHANNELS: dict[str, tuple[str, list[str], str]] = {
+    "lr": ("low", list(_RGB), "LR colour / the LR BRDF factor when demodulated (else the LR colour)"),
+    "lr_color": ("low", list(_RGB), "LR colour"),
+    "lr_brdf": ("low", list(_RGB), "LR BRDF factor"),
+    "brdf": ("high", list(_RGB), "HR BRDF factor F (1 where F < 1e-4): color = irradiance * brdf"),
+    "gbuffer": ("high", [c for b in GBUFFER_STACK for c in _channels(b)], "HR G-buffer stack"),
+    "spatial_mask": ("high", ["mask"], "1 where the HR G-buffer differs from the bilinearly upsampled LR one"),
+    "history": ("high", list(_RGB), "previous irradiance, warped to this frame by the motion vectors"),
+    "temporal_mask": (
+        "high",
+        ["depth_difference", "albedo_difference.r", "albedo_difference.g", "albedo_difference.b", "normal_term"],
+        "|depth - warped previous depth|, |albedo - warped previous albedo|, (1 - n . n_previous) / 2",
+    ),
+    "motion": ("high", ["motion.x", "motion.y"], "HR pixels, current minus previous position, y up"),
+    "lr_gbuffer": ("low", ["depth", *_channels("normal")], "LR depth and normal"),
+    "prev_lr_color": ("low", list(_RGB), "the previous frame's LR colour"),
+    "prev_lr_gbuffer": ("low", ["depth", *_channels("normal")], "the previous frame's LR depth and normal"),
+    "history2": ("high", list(_RGB), "irradiance of frame t-2 warped to t through t-1"),
+}
+
+
+class ExportError(RuntimeError):
+    """A model that cannot be exported as asked, or a graph that does not match torch."""
+
+
+class InferenceGraph(nn.Module):
+    """The module's inference path as one traceable function: the network on the inputs it names, then the
+    remodulation (``SuperResolutionModule.forward``). ``inputs`` is a dict of batch tensors by key."""
+
+    def __init__(self, net: nn.Module) -> None:
+        super().__init__()
+        self.net = net
+        self.net_args = tuple(inspect.signature(net.forward).parameters)
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The graph's input names, in the order of the network's forward, the BRDF factor last."""
+        wanted = set(self.net.inputs) | {"scale"}
+        names = [k for k in self.net_args if k in wanted]
+        return (*names, "brdf") if "brdf" not in names else tuple(names)
+
+    def forward(self, inputs: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
+        irradiance = self.net(**{k: inputs[k] for k in self.net_args if k in inputs})["irradiance"]
+        return irradiance * inputs["brdf"], irradiance
+
+
+def fold(net: nn.Module) -> None:
+    """Fold every RIR block of ``net`` into its 3x3 convolution (same outputs)."""
+    for block in net.modules():
+        if isinstance(block, RIRBlock) and block.fused is None:
+            block.reparameterize()
+
+
+def example_inputs(graph: InferenceGraph, height: int, width: int, scale: float) -> dict[str, Tensor]:
+    """Random inputs of every graph input at an ``height x width`` output and ``scale`` (positive values)."""
+    inputs = dummy_inputs(graph.net, height, width, scale)
+    inputs["brdf"] = 0.2 + 0.8 * torch.rand(1, 3, height, width)
+    return {k: inputs[k] for k in graph.inputs}
+
+
+def _dynamic_shapes(graph: InferenceGraph) -> dict:
+    """Dynamic height and width of every image input, each a multiple of 2 (HR and LR apart). The network pads odd
+    sizes by branching on their parity; a graph holds one branch, the even one, which torch.export then keeps."""
+    from torch.export import Dim
+
+    dims = {
+        "high": {2: 2 * Dim("half_height", min=8), 3: 2 * Dim("half_width", min=8)},
+        "low": {2: 2 * Dim("half_lr_height", min=8), 3: 2 * Dim("half_lr_width", min=8)},
+    }
+    return {"inputs": {k: None if k == "scale" else dims[CHANNELS[k][0]] for k in graph.inputs}}
+
+
+def export_onnx(
+    module: SuperResolutionModule,
+    path: str | Path,
+    *,
+    height: int,
+    width: int,
+    scale: float,
+    dynamic: bool = False,
+    fp16: bool = False,
+    opset: int = 18,
+) -> tuple[InferenceGraph, dict[str, Tensor], Tensor]:
+    """Write ``module``'s inference graph to ``path`` (RIR blocks folded); return the graph, the example inputs it
+    was traced with and torch's float32 ``color`` on them."""
+    if opset < MIN_OPSET:
+        raise ExportError(f"opset must be >= {MIN_OPSET}, got {opset}")
+    for name in ("onnxscript", "onnx_ir"):  # their optimiser logs every pass at INFO, which Hydra's logging shows
+        logging.getLogger(name).setLevel(logging.WARNING)
+    # torch.onnx warns that torchvision's operators are not registered: wdss uses none of them
+    logging.getLogger("torch.onnx._internal.exporter._registration").setLevel(logging.ERROR)
+    net = module.net.eval()
+    if getattr(net, "fixed_scale", False) and float(scale) != float(net.scale):
+        raise ExportError(f"this {net.__class__.__name__} upsamples by {net.scale} only, not by {scale}")
+    fold(net)
+    graph = InferenceGraph(net).eval()
+    inputs = example_inputs(graph, height, width, scale)
+    with torch.no_grad():
+        irradiance = net(**{k: v for k, v in inputs.items() if k in graph.net_args}).get("irradiance")
+    if irradiance is None:
+        raise ExportError(f"{net.__class__.__name__} outputs a display image, no linear irradiance: not exported")
+    reference = irradiance * inputs["brdf"]
+    if fp16:  # a copy: the module keeps its float32 weights
+        graph = copy.deepcopy(graph).half()
+        inputs = {k: v.half() for k, v in inputs.items()}
+    program = torch.onnx.export(
+        graph,
+        (),
+        kwargs={"inputs": inputs},
+        input_names=list(graph.inputs),
+        output_names=list(OUTPUTS),
+        opset_version=opset,
+        dynamo=True,
+        dynamic_shapes=_dynamic_shapes(graph) if dynamic else None,
+        verbose=False,
+    )
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    program.save(str(path), external_data=False)
+    return graph, inputs, reference
+
+
+def run_onnx(path: str | Path, inputs: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The graph's outputs by name on onnxruntime's CPU execution provider."""
+    import onnxruntime
+
+    session = onnxruntime.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    feed = {i.name: np.asarray(inputs[i.name]) for i in session.get_inputs()}
+    return dict(zip([o.name for o in session.get_outputs()], session.run(None, feed), strict=True))
+
+
+def relative_error(output: np.ndarray, reference: np.ndarray) -> float:
+    """``max |output - reference| / max |reference|``."""
+    reference = np.asarray(reference, dtype=np.float64)
+    return float(np.abs(np.asarray(output, dtype=np.float64) - reference).max() / max(np.abs(reference).max(), 1e-30))
+
+
+def input_layout(
+    module: SuperResolutionModule,
+    graph: InferenceGraph,
+    prep: Preprocessing,
+    *,
+    height: int,
+    width: int,
+    scale: float,
+    dynamic: bool,
+    dtype: str,
+    opset: int,
+) -> dict[str, Any]:
+    """The sidecar of an exported graph: what an engine must feed it, channel by channel."""
+    lr_height, lr_width = lr_size(height, width, scale)
+    sizes = {
+        "high": ["2*half_height", "2*half_width"] if dynamic else [height, width],
+        "low": ["2*half_lr_height", "2*half_lr_width"] if dynamic else [lr_height, lr_width],
+    }
+    inputs = []
+    for name in graph.inputs:
+        if name == "scale":
+            inputs.append({"name": name, "shape": [1], "dtype": dtype, "description": "the upsampling factor s"})
+            continue
+        resolution, channels, description = CHANNELS[name]
+        shape = [1, len(channels), *sizes[resolution]]
+        inputs.append(
+            {
+                "name": name,
+                "shape": shape,
+                "dtype": dtype,
+                "resolution": resolution,
+                "channels": channels,
+                "description": description,
+            }
+        )
+    net = graph.net
+    recurrent = module.temporal == "recurrent"
+    return {
+        "format": "onnx",
+        "opset": opset,
+        "dtype": dtype,
+        "layout": "NCHW, batch of 1",
+        "size": {
+            "dynamic": dynamic,
+            # dynamic: any size whose HR and LR heights and widths are even (the graph holds the even branch)
+            "height": None if dynamic else height,
+            "width": None if dynamic else width,
+            "lr_height": None if dynamic else lr_height,
+            "lr_width": None if dynamic else lr_width,
+            "lr_size": "h = round(H / s), w = round(W / s)",
+        },
+        "inputs": inputs,
+        "outputs": [
+            {"name": "color", "channels": list(_RGB), "description": "HR linear HDR colour = irradiance * brdf"},
+            {"name": "irradiance", "channels": list(_RGB), "description": "HR demodulated prediction"},
+        ],
+        "preprocessing": {
+            "demodulate": prep.demodulate,
+            "brdf": {
+                "extranet": "F = base_color + (1 - metallic) * 0.08 * specular",
+                "split_sum": "F = base (1 - metallic) + F0 A + B, (A, B) = wdss.data.brdf.ggx_lut(NoV, roughness)",
+            }[prep.brdf],
+            "brdf_name": prep.brdf,
+            "depth_far": prep.depth_far,  # depth beyond it is set to 0 (background)
+            "depth_normalize": prep.depth_normalize,  # per frame (min, max) -> (0, 1); LR by its HR frame's range
+            "normals": "unit length, world space",
+            "color_max": prep.color_max,  # colour clipped to [0, color_max] before anything else, when set
+            "spatial_thresholds": dict(prep.spatial_thresholds),
+        },
+        # The graph applies log1p to lr and history itself: feed linear values.
+        "log1p_inside": bool(getattr(net, "input_log", False)),
+        "exposure": (
+            "colour is linear radiance pre-exposed as the training frames were (wdss renders: median luminance "
+            "~0.18): multiply the engine's pre-tonemap colour by its exposure before demodulating"
+        ),
+        "display": {"tonemap": module.hparams.tonemap_name, "exposure": module.hparams.tonemap_exposure},
+        "history": (
+            "recurrent: the previous frame's irradiance output warped by this frame's motion vectors "
+            "(wdss.data.warp.warp_backward: bilinear, zeros outside); on the first frame, lr upsampled bilinearly "
+            "(align_corners=False)"
+            if recurrent
+            else "the previous HR frame's irradiance, warped by the motion vectors"
+            if "history" in graph.inputs
+            else None
+        ),
+        "rir_folded": any(isinstance(m, RIRBlock) for m in net.modules()),
+    }
+
+
+def export(cfg: DictConfig) -> Path:
+    """Export the checkpoint of ``cfg.ckpt_path`` as ``cfg.format``; the path of the graph written."""
+    if cfg.format != "onnx":
+        raise ExportError(f"format must be onnx, got {cfg.format!r}")
+    ckpt = Path(str(cfg.ckpt_path))
+    read_checkpoint(ckpt)  # a wdss checkpoint whose model config builds only allowlisted callables
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
+    height, width, scale = int(cfg.height), int(cfg.width), float(cfg.scale)
+    dynamic, fp16 = bool(cfg.dynamic), bool(cfg.fp16)
+    if cfg.output:
+        path = Path(str(cfg.output))
+    else:
+        size = "dynamic" if dynamic else f"{width}x{height}_{scale:g}x"
+        path = ckpt.with_name(f"{ckpt.stem}_{size}{'_fp16' if fp16 else ''}.onnx")
+    overrides = OmegaConf.to_container(cfg.preprocessing, resolve=True) if cfg.get("preprocessing") else {}
+    prep = Preprocessing(**{**training_preprocessing(ckpt), **overrides})
+    graph, inputs, reference = export_onnx(
+        module, path, height=height, width=width, scale=scale, dynamic=dynamic, fp16=fp16, opset=int(cfg.opset)
+    )
+    dtype = "float16" if fp16 else "float32"
+    layout = input_layout(
+        module, graph, prep, height=height, width=width, scale=scale, dynamic=dynamic, dtype=dtype, opset=int(cfg.opset)
+    )
+    layout.update({"file": path.name, "checkpoint": str(ckpt.resolve())})
+    sidecar = path.with_suffix(".json")
+    sidecar.write_text(json.dumps(layout, indent=1) + "\n")
+    print(f"wdss.export: {ckpt} -> {path} ({path.stat().st_size / 1e6:.2f} MB, opset {cfg.opset}, {dtype})")
+    print(f"  inputs: {', '.join(graph.inputs)}; outputs: {', '.join(OUTPUTS)}; layout: {sidecar}")
+    if cfg.verify:
+        error = relative_error(run_onnx(path, {k: v.numpy() for k, v in inputs.items()})["color"], reference.numpy())
+        print(f"  onnxruntime (CPU) vs torch on the example inputs: max |difference| / max = {error:.2e}")
+        if not error <= TOLERANCE[dtype]:
+            raise ExportError(f"{path}: onnxruntime differs from torch by {error:.2e} > {TOLERANCE[dtype]:g}")
+    return path
+
+
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR / "inference"), config_name="export")
+def main(cfg: DictConfig) -> None:
+    export(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,119 @@
+"""wdss.export: the ONNX graph of a checkpoint's model matches torch on onnxruntime (CPU), with its input layout."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import onnx
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from tests.model.helpers import fixture_batches, tiny_checkpoint
+from tests.test_train import run_module
+from wdss.export import ExportError, export, relative_error, run_onnx
+from wdss.model.module import SuperResolutionModule
+from wdss.paths import CONF_DIR
+
+CONFIGS = {
+    "none": ["transform=none"],
+    "dwt": ["transform=dwt", "basis=haar"],
+    "swt_rir": ["transform=swt", "basis=db4", "model.net.gbuffer_block=rir"],
+    "fusion_ll": ["variant=fusion_ll"],
+    "dfasr": ["variant=dfasr"],
+}
+
+
+def compose_export(tmp_path, *overrides: str):
+    with initialize_config_dir(config_dir=str(CONF_DIR / "inference"), version_base="1.3"):
+        return compose("export", overrides=[f"paths.log_dir={tmp_path}", *overrides])
+
+
+def torch_colour(module: SuperResolutionModule, batches: list[dict]) -> tuple[dict, torch.Tensor]:
+    """The last batch as the graph takes it (a recurrent model's history: its output of the frame before, warped)
+    and the module's colour on it."""
+    previous = None
+    with torch.no_grad():
+        for batch in batches:
+            if module.temporal == "recurrent":
+                batch = module._with_history(batch, previous)
+            out = module(batch)
+            previous = out["irradiance"]
+    return batch, out["color"]
+
+
+def check_parity(path, module: SuperResolutionModule, batches: list[dict], tolerance: float = 1e-4) -> float:
+    batch, reference = torch_colour(module, batches)
+    assert (reference > 0).float().mean() > 0.1  # a random network whose output is not all clamped to zero
+    session_inputs = json.loads(path.with_suffix(".json").read_text())["inputs"]
+    outputs = run_onnx(path, {i["name"]: batch[i["name"]].numpy() for i in session_inputs})
+    error = relative_error(outputs["color"], reference.numpy())
+    assert error <= tolerance, error
+    return error
+
+
+@pytest.mark.parametrize("name", CONFIGS)
+def test_onnx_graph_matches_torch_on_a_fixture_frame(name, tmp_path):
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", *CONFIGS[name])
+    path = export(compose_export(tmp_path, f"ckpt_path={ckpt}", "height=48", "width=96", "scale=2"))
+    assert path == tmp_path / "model_96x48_2x.onnx"
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True).eval()
+    check_parity(path, module, fixture_batches(module.inputs)[:2])
+    graph = onnx.load(path)
+    assert graph.opset_import[0].version >= 17
+    names = {i.name for i in graph.graph.initializer}
+    layout = json.loads(path.with_suffix(".json").read_text())
+    expected = ["lr", "gbuffer", "spatial_mask", "scale", "history", "temporal_mask", "brdf"]
+    assert [i.name for i in graph.graph.input] == [i["name"] for i in layout["inputs"]] == expected
+    assert [o.name for o in graph.graph.output] == ["color", "irradiance"]
+    assert layout["inputs"][1]["channels"][:4] == ["base_color.r", "base_color.g", "base_color.b", "depth"]
+    assert layout["history"].startswith("recurrent" if name == "dfasr" else "the previous HR frame")
+    # No frame-sized constant (an exporter folds in-place padding into one): weights are the largest tensors.
+    largest = max(p.numel() for p in module.parameters())
+    assert max(int(np.prod(i.dims)) for i in graph.graph.initializer) <= largest
+    if name == "swt_rir":  # the RIR blocks run folded: one 3x3 convolution each, no expansion or reduction
+        assert any(".fused.weight" in n for n in names) and not any(".expand." in n for n in names)
+        assert layout["rir_folded"]
+
+
+def test_dynamic_export_takes_other_even_sizes_and_the_training_preprocessing(tmp_path):
+    run = tmp_path / "run"
+    (run / ".hydra").mkdir(parents=True)
+    (run / ".hydra" / "config.yaml").write_text("data:\n  preprocessing:\n    color_max: 10.0\n    depth_far: 50.0\n")
+    ckpt = tiny_checkpoint(run / "checkpoints" / "last.ckpt", "transform=swt", "basis=haar")
+    path = export(compose_export(tmp_path, f"ckpt_path={ckpt}", "height=32", "width=64", "dynamic=true"))
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True).eval()
+    for scale in (2.0, 4.0):  # LR 24x48 (a native folder) and 12x24 (point-sampled), HR 48x96: not the traced size
+        check_parity(path, module, fixture_batches(module.inputs, scale)[:1])
+    layout = json.loads(path.with_suffix(".json").read_text())
+    assert layout["size"]["dynamic"] and layout["inputs"][0]["shape"] == [1, 3, "2*half_lr_height", "2*half_lr_width"]
+    assert layout["preprocessing"]["color_max"] == 10.0 and layout["preprocessing"]["depth_far"] == 50.0
+
+
+def test_fp16_export_stays_close_to_float32_torch(tmp_path):
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "transform=dwt", "basis=haar")
+    path = export(compose_export(tmp_path, f"ckpt_path={ckpt}", "height=48", "width=96", "fp16=true"))
+    assert path.name == "model_96x48_2x_fp16.onnx"
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True).eval()
+    batch, reference = torch_colour(module, fixture_batches(module.inputs)[:1])
+    inputs = {k: v.half().numpy() for k, v in batch.items() if isinstance(v, torch.Tensor)}
+    assert relative_error(run_onnx(path, inputs)["color"], reference.numpy()) <= 1e-2
+
+
+def test_export_refuses_an_opset_below_17_and_other_formats(tmp_path):
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "transform=none")
+    with pytest.raises(ExportError, match="opset must be >= 17"):
+        export(compose_export(tmp_path, f"ckpt_path={ckpt}", "height=48", "width=96", "opset=16"))
+    with pytest.raises(ExportError, match="format must be onnx"):
+        export(compose_export(tmp_path, f"ckpt_path={ckpt}", "format=tensorrt"))
+
+
+@pytest.mark.slow
+def test_python_m_wdss_export_writes_graph_and_layout_and_checks_them(tmp_path):
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "variant=dfasr")
+    args = (f"ckpt_path={ckpt}", "height=48", "width=96", f"paths.log_dir={tmp_path}")
+    done = run_module(tmp_path, "wdss.export", *args)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert (tmp_path / "model_96x48_2x.onnx").is_file() and (tmp_path / "model_96x48_2x.json").is_file()
+    assert "onnxruntime (CPU) vs torch on the example inputs" in done.stdout
