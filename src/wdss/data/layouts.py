@@ -326,7 +326,12 @@ class Sequence:
         )
 
     def has(self, buffer: str, height: int, frame: int | None = None) -> bool:
-        return self.layout.locate(buffer, height, self.frames[0] if frame is None else frame, self._index) is not None
+        return self.file(buffer, height, self.frames[0] if frame is None else frame) is not None
+
+    def file(self, buffer: str, height: int, frame: int) -> str | None:
+        """The file (relative to the sequence) holding ``buffer`` of ``frame`` at ``height``, or None."""
+        found = self.layout.locate(buffer, height, frame, self._index)
+        return found[0] if found else None
 
     def camera(self, frame: int) -> torch.Tensor | None:
         """The 3x3 camera-to-world rotation of ``frame`` from the sidecar ``sequence.json``, if there is one."""

@@ -162,7 +162,7 @@ class SuperResolutionModule(L.LightningModule):
         sequence, the LR irradiance upsampled bilinearly (as DFASR starts), not zeros."""
         step = dict(batch)
         if previous is None:
-            size = batch["target"].shape[-2:]
+            size = batch["brdf"].shape[-2:]  # the HR size, also where there is no target (wdss.upscale)
             step["history"] = torch.nn.functional.interpolate(
                 batch["lr"], size=size, mode="bilinear", align_corners=False
             )

@@ -1,0 +1,323 @@
+"""Upscale entry point: ``python -m wdss.upscale ckpt_path=PATH input=SEQUENCE scale=2 [output=DIR]
+[frames=[start,stop]] [compare=true] [on_error=skip]``.
+
+Runs a trained model on a sequence of one's own frames, in any layout wdss reads, reading only the buffers the
+model needs (the LR colour from a native folder that matches the scale, else point-sampled from the HR frame),
+frame by frame in order: a recurrent model is fed its own previous output, warped, as in evaluation. Writes into
+``output`` (default ``<paths.log_dir>/upscale/<sequence>_<s>x``):
+
+* per frame, the HR prediction as linear HDR EXR under the input's own name for the HR colour buffer, so that
+  wdss reads the folder back as a sequence, and ``png/<frame>.png`` tone-mapped as the module's metrics see it
+  (with ``compare``: ``compare/<frame>.png``, bilinear-demodulated baseline | prediction);
+* ``<sequence>_<s>x.mp4`` of the PNGs (:mod:`wdss.video`);
+* ``upscale.json``: what made the frames (checkpoint digest, input, scale), each frame's metrics, skipped frames.
+
+When the input holds the HR colour (a wdss dataset) it is the target: PSNR, SSIM and FLIP are printed per frame
+and overall. A rerun of a killed run resumes: a frame whose files all exist is not computed again (each file is
+written under a temporary name and renamed, the EXR last). A frame that fails to read stops the run with the
+file's name, or, with ``on_error=skip``, is reported and left out.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+import hydra
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+from torch import Tensor
+
+from wdss.checkpoint import read_checkpoint, training_preprocessing
+from wdss.data.dataset import Collate, FrameDataset, Preprocessing
+from wdss.data.exr import ExrError, read_exr, write_exr
+from wdss.data.layouts import SceneError, Sequence
+from wdss.model.baselines import Upsample
+from wdss.model.module import SuperResolutionModule
+from wdss.paths import CONF_DIR
+from wdss.video import Mp4Writer, labelled
+
+__all__ = ["UpscaleError", "main", "output_name", "upscale"]
+
+RECORD = "upscale.json"
+SHOWN = ("psnr", "ssim", "flip")  # printed per frame (every metric is recorded)
+_READ_ERRORS = (SceneError, ExrError, OSError)
+
+
+class UpscaleError(ValueError):
+    """An upscale that cannot run as asked."""
+
+
+def output_name(seq: Sequence, frame: int) -> str:
+    """The file, relative to the output folder, of a frame's prediction: the input's HR colour file, or (an input
+    without HR colour) its LR colour file in the HR folder of its layout."""
+    name = seq.file("color", seq.hr, frame)
+    if name is not None:
+        return name
+    for height in seq.resolutions[1:]:
+        name = seq.file("color", height, frame)
+        if name is not None:
+            folder, _, file = name.partition("/")
+            return re.sub(r"\d+P$", f"{seq.hr}P", folder) + f"/{file}"
+    raise SceneError(f"sequence {seq.name!r}, frame {frame}: no colour buffer at any resolution")
+
+
+def _digest(path: Path) -> str:
+    sha = hashlib.sha256()
+    with path.open("rb") as file:
+        for block in iter(lambda: file.read(1 << 20), b""):
+            sha.update(block)
+    return sha.hexdigest()
+
+
+def _save_png(path: Path, rgb: np.ndarray) -> None:
+    """An 8-bit PNG written under a temporary name, then renamed: a killed run leaves no half file."""
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    Image.fromarray(rgb).save(tmp, format="PNG")
+    os.replace(tmp, path)
+
+
+def _to_uint8(image: Tensor) -> np.ndarray:
+    return (image[0].permute(1, 2, 0).cpu().numpy() * 255).round().astype(np.uint8)
+
+
+class Record:
+    """``upscale.json`` of an output folder: the run's identity, and per frame its metrics or why it was skipped.
+
+    A folder made by another checkpoint, input or scale is refused, never mixed into.
+    """
+
+    def __init__(self, out_dir: Path, identity: dict[str, Any]) -> None:
+        self.path = out_dir / RECORD
+        self.identity = identity
+        self.frames: dict[str, dict[str, float]] = {}
+        self.skipped: dict[str, str] = {}
+        if self.path.exists():
+            old = json.loads(self.path.read_text())
+            if {k: old.get(k) for k in identity} != identity:
+                differ = ", ".join(f"{k} {old.get(k)!r} (now {v!r})" for k, v in identity.items() if old.get(k) != v)
+                raise UpscaleError(
+                    f"{out_dir} holds the frames of another upscale ({differ}): choose another output= or remove it"
+                )
+            self.frames = old.get("frames", {})
+
+    def save(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps({**self.identity, "frames": self.frames, "skipped": self.skipped}, indent=1))
+        os.replace(tmp, self.path)
+
+
+class Progress:
+    """A rich progress bar on a terminal; one flushed line per frame otherwise (a pipe or log file shows no bar)."""
+
+    def __init__(self, label: str, total: int) -> None:
+        self.label, self.total, self.count = label, total, 0
+        self._bar = None
+        if sys.stdout.isatty():
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+            columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+            self._bar = Progress(*columns)
+            self._task = self._bar.add_task(label, total=total)
+
+    def __enter__(self) -> Progress:
+        if self._bar is not None:
+            self._bar.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+
+    def done(self, text: str | None) -> None:
+        """One frame more: ``text`` describes it (None: a frame resumed from an earlier run, not shown)."""
+        self.count += 1
+        if self._bar is not None:
+            if text is not None:
+                self._bar.console.print(text)
+            self._bar.advance(self._task)
+        elif text is not None:
+            print(f"{self.label}: {self.count}/{self.total} {text}", flush=True)
+
+
+def _describe(values: dict[str, float]) -> str:
+    units = {"psnr": " dB"}
+    return ", ".join(f"{k.upper()} {values[k]:.4g}{units.get(k, '')}" for k in SHOWN if k in values)
+
+
+def upscale(cfg: DictConfig) -> dict[str, float]:
+    """Upscale ``cfg.input`` with the model of ``cfg.ckpt_path``; the mean metrics (empty without a target)."""
+    if cfg.on_error not in ("stop", "skip"):
+        raise UpscaleError(f"on_error must be stop or skip, got {cfg.on_error!r}")
+    ckpt = Path(str(cfg.ckpt_path))
+    read_checkpoint(ckpt)  # a wdss checkpoint whose model config builds only allowlisted callables
+    device = torch.device(str(cfg.device))
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location=device, weights_only=True).eval()
+    seq = Sequence(str(cfg.input), str(cfg.layout))
+    scale = float(cfg.scale)
+    net = module.net
+    if getattr(net, "fixed_scale", False) and scale != float(net.scale):
+        raise UpscaleError(f"the model ({net.__class__.__name__}) upsamples by {net.scale} only, not by {scale:g}")
+    overrides = OmegaConf.to_container(cfg.preprocessing, resolve=True) if cfg.get("preprocessing") else {}
+    prep = Preprocessing(**{**training_preprocessing(ckpt), **overrides})
+    hr_color = seq.has("color", seq.hr)
+    has_target = bool(cfg.metrics) and hr_color
+    # The history a temporal model gets: its own previous output (recurrent; also a gt_history model on frames
+    # without HR colour, as an engine runs it), or the previous HR frame read from the input (gt_history).
+    feed_back = module.temporal == "recurrent" or (module.temporal == "gt_history" and not hr_color)
+    keys = set(module.inputs)
+    if feed_back:
+        keys = (keys - {"history"}) | {"motion"}
+    if not has_target:
+        keys.discard("target")
+    if cfg.compare:
+        keys |= {"lr", "brdf"}
+    frames = {seq.name: tuple(cfg.frames)} if cfg.frames is not None else None
+    dataset = FrameDataset(
+        [seq], sorted(keys), scale=scale, patch=None, preprocessing=prep, first_frame="zeros", frame_ranges=frames
+    )
+    collate = Collate(dataset.keys, prep, scale)
+    out_dir = Path(str(cfg.output or Path(str(cfg.paths.log_dir)) / "upscale" / f"{seq.name}_{scale:g}x"))
+    record = Record(
+        out_dir, {"checkpoint_sha256": _digest(ckpt), "input": str(seq.source.path.resolve()), "scale": scale}
+    )
+    baseline = Upsample("bilinear", demodulated=True)
+
+    def files(frame: int) -> list[Path]:
+        """A frame's outputs, the EXR (written last) first."""
+        paths = [out_dir / output_name(seq, frame), out_dir / "png" / f"{frame:04d}.png"]
+        return paths + ([out_dir / "compare" / f"{frame:04d}.png"] if cfg.compare else [])
+
+    def complete(frame: int) -> bool:
+        try:
+            written = all(p.exists() for p in files(frame))
+        except SceneError:  # no colour at any resolution: the frame fails to read
+            return False
+        return written and (not has_target or str(frame) in record.frames)
+
+    def read_back(index: int) -> Tensor | None:
+        """The irradiance a finished frame fed forward: its EXR colour over its BRDF factor."""
+        try:
+            brdf = collate([dataset[index]])["brdf"].to(device)
+            frame = dataset.items[index][1]
+            planes = read_exr(files(frame)[0], seq.layout.SLOTS["color"].channels)
+        except _READ_ERRORS:
+            return None
+        color = torch.from_numpy(np.stack(list(planes.values())))[None].to(device)
+        return color / brdf
+
+    lr_height = dataset.native_lr(seq)
+    done = [frame for _, frame in dataset.items if complete(frame)]
+    print(
+        f"wdss.upscale: {seq.name} ({seq.layout.name} layout, {len(dataset)} frames) at {scale:g}x with {ckpt}: "
+        f"LR {f'from the native {lr_height}P folder' if lr_height else f'point-sampled from {seq.hr}P'}, "
+        f"history {'fed back from the output' if feed_back else 'from the input' if 'history' in keys else 'none'}, "
+        f"{'metrics against the HR colour' if has_target else 'no target'} -> {out_dir}",
+        flush=True,
+    )
+    if done:
+        print(f"  {len(done)} of {len(dataset)} frames already done in {out_dir}: resuming", flush=True)
+    previous: tuple[int, Tensor] | None = None  # (frame, irradiance) of the last frame computed
+    with Progress(f"upscale {seq.name} {scale:g}x", len(dataset)) as progress:
+        for index, (_, frame) in enumerate(dataset.items):
+            if frame in done:
+                progress.done(None)
+                continue
+            try:
+                batch = collate([dataset[index]])
+            except _READ_ERRORS as err:
+                if cfg.on_error == "stop":
+                    raise UpscaleError(f"frame {frame} cannot be read: {err} (on_error=skip goes on)") from err
+                record.skipped[str(frame)] = str(err)
+                record.save()
+                progress.done(f"frame {frame:04d} SKIPPED, it cannot be read: {err}")
+                continue
+            batch = {k: v.to(device) if isinstance(v, Tensor) else v for k, v in batch.items()}
+            if feed_back:
+                if (previous is None or previous[0] != frame - 1) and index and dataset.items[index - 1][1] in done:
+                    fed = read_back(index - 1)
+                    previous = (frame - 1, fed) if fed is not None else None
+                history = previous[1] if previous is not None and previous[0] == frame - 1 else None
+                batch = module._with_history(batch, history)
+            with torch.inference_mode():
+                out = module(batch)
+            color = out.get("color")
+            if color is None:
+                raise UpscaleError(f"{net.__class__.__name__} outputs a display image, no linear HDR colour to write")
+            reference = batch["target"] if has_target else color  # the display exposure, when it is "auto"
+            _save_png(files(frame)[1], _to_uint8(module.tone(color.float(), reference.float())))
+            if cfg.compare:
+                base = baseline(brdf=batch["brdf"], lr=batch["lr"])["irradiance"] * batch["brdf"]
+                tiles = [module.tone(x.float(), reference.float()) for x in (base, color)]
+                panel = labelled(_to_uint8(torch.cat(tiles, dim=-1)), ("bilinear_demodulated", "prediction"))
+                _save_png(files(frame)[2], panel)
+            text = f"frame {frame:04d}"
+            if has_target:
+                values = {k: float(v[0]) for k, v in module.metrics(color.float(), batch["target"].float()).items()}
+                record.frames[str(frame)] = values
+                text += f": {_describe(values)}"
+            record.skipped.pop(str(frame), None)
+            record.save()
+            channels = seq.layout.SLOTS["color"].channels
+            write_exr(files(frame)[0], dict(zip(channels, color[0].float().cpu().numpy(), strict=True)))
+            previous = (frame, out["irradiance"])
+            progress.done(text)
+    if cfg.video:
+        _video(out_dir, seq, scale, [files(f)[-1] for _, f in dataset.items if complete(f)], cfg.fps)
+    return _summary(record, seq, scale, out_dir, [f for _, f in dataset.items])
+
+
+def _video(out_dir: Path, seq: Sequence, scale: float, pictures: list[Path], fps: float | None) -> None:
+    """An MP4 of the frames' pictures, in order, written under a temporary name and renamed."""
+    from PIL import Image
+
+    if not pictures:
+        return
+    path = out_dir / f"{seq.name}_{scale:g}x.mp4"
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.mp4")
+    writer = Mp4Writer(tmp, float(fps or seq.frame_rate))
+    try:
+        for picture in pictures:
+            writer.write(np.asarray(Image.open(picture).convert("RGB")))
+    finally:
+        writer.close()
+    os.replace(tmp, path)
+    print(f"  video: {path} ({writer.frames} frames)", flush=True)
+
+
+def _summary(record: Record, seq: Sequence, scale: float, out_dir: Path, frames: list[int]) -> dict[str, float]:
+    """Print and return the mean of every metric over the frames (finite values: identical frames' PSNR is inf)."""
+    rows = [record.frames[str(f)] for f in frames if str(f) in record.frames]
+    means = {}
+    for key in rows[0] if rows else ():
+        values = [row[key] for row in rows if np.isfinite(row[key])]
+        if values:
+            means[key] = float(np.mean(values))
+    print(f"wdss.upscale: {seq.name} at {scale:g}x -> {out_dir}", flush=True)
+    if means:
+        print(f"  overall ({len(rows)} frames): {_describe(means)}", flush=True)
+    skipped = {int(f): why for f, why in record.skipped.items() if int(f) in frames}
+    if skipped:
+        print(f"  {len(skipped)} frame(s) SKIPPED, they could not be read:", file=sys.stderr, flush=True)
+        for frame, why in sorted(skipped.items()):
+            print(f"    frame {frame}: {why}", file=sys.stderr, flush=True)
+    return means
+
+
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR / "inference"), config_name="upscale")
+def main(cfg: DictConfig) -> None:
+    upscale(cfg)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,126 @@
+"""wdss.upscale: a checkpoint's model on a sequence, frames wdss reads back, metrics, resume, unreadable frames."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+
+from tests.model.helpers import fixture_batches, tiny_checkpoint
+from tests.test_train import run_module
+from wdss.data.layouts import Sequence
+from wdss.data.synthetic import write_sequence
+from wdss.model.module import SuperResolutionModule
+from wdss.paths import CONF_DIR, PROJECT_ROOT
+from wdss.upscale import UpscaleError, upscale
+
+FIXTURE = PROJECT_ROOT / "tests" / "fixtures" / "rendered" / "fixture_000"
+
+
+def compose_upscale(tmp_path, *overrides: str):
+    with initialize_config_dir(config_dir=str(CONF_DIR / "inference"), version_base="1.3"):
+        return compose("upscale", overrides=[f"paths.log_dir={tmp_path}", "video=false", *overrides])
+
+
+def written(out_dir, frames) -> dict[int, np.ndarray]:
+    """The colour of each frame, read back from the output folder as wdss reads a sequence."""
+    sequence = Sequence(out_dir)
+    return {f: sequence.read(f, sequence.hr, ["color"])["color"] for f in frames}
+
+
+def test_upscale_writes_frames_that_wdss_reads_back_and_prints_the_metrics(tmp_path, capsys):
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "transform=swt", "basis=haar")
+    out = tmp_path / "up"
+    metrics = upscale(compose_upscale(tmp_path, f"ckpt_path={ckpt}", f"input={FIXTURE}", f"output={out}"))
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True).eval()
+    with torch.no_grad():  # the same model on the same frames through the data path (history: the input's)
+        expected = {int(b["frame"][0]): module(b)["color"][0].numpy() for b in fixture_batches(module.inputs)}
+    assert sorted(expected) == [0, 1, 2, 3, 4]
+    for frame, colour in written(out, expected).items():
+        np.testing.assert_allclose(colour, expected[frame], rtol=1e-6, atol=1e-6)
+        assert (out / "48P" / f"PretonemapMetallic.{frame:04d}.exr").is_file() and (
+            out / "png" / f"{frame:04d}.png"
+        ).is_file()
+    record = json.loads((out / "upscale.json").read_text())
+    assert sorted(record["frames"]) == ["0", "1", "2", "3", "4"] and {"psnr", "ssim", "flip"} <= set(
+        record["frames"]["2"]
+    )
+    assert metrics["psnr"] == pytest.approx(np.mean([v["psnr"] for v in record["frames"].values()]))
+    printed = capsys.readouterr().out
+    assert "frame 0002: PSNR" in printed and "overall (5 frames): PSNR" in printed
+
+
+def test_a_killed_recurrent_upscale_resumes_without_redoing_finished_frames(tmp_path, capsys):
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "variant=dfasr")  # recurrent: frame t sees its output at t - 1
+    out = tmp_path / "up"
+    cfg = compose_upscale(tmp_path, f"ckpt_path={ckpt}", f"input={FIXTURE}", f"output={out}")
+    upscale(cfg)
+    uninterrupted = written(out, range(5))
+    for frame in (3, 4):  # killed during frame 3: its EXR (written last) is missing
+        (out / "48P" / f"PretonemapMetallic.{frame:04d}.exr").unlink()
+    (out / "png" / "0004.png").unlink()
+    finished = {f: (out / "48P" / f"PretonemapMetallic.{f:04d}.exr").stat().st_mtime_ns for f in range(3)}
+    capsys.readouterr()
+    upscale(cfg)
+    assert "3 of 5 frames already done" in capsys.readouterr().out
+    assert {f: (out / "48P" / f"PretonemapMetallic.{f:04d}.exr").stat().st_mtime_ns for f in range(3)} == finished
+    # Frame 3 is fed frame 2's output as read back: the result is the uninterrupted run's.
+    for frame, colour in written(out, range(5)).items():
+        np.testing.assert_allclose(colour, uninterrupted[frame], rtol=1e-5, atol=1e-6)
+    with pytest.raises(UpscaleError, match="holds the frames of another upscale .*scale 2.0 \\(now 3.0\\)"):
+        upscale(compose_upscale(tmp_path, f"ckpt_path={ckpt}", f"input={FIXTURE}", f"output={out}", "scale=3"))
+
+
+def test_a_frame_that_cannot_be_read_stops_the_run_or_is_skipped_and_named(tmp_path, capsys):
+    sequence = shutil.copytree(FIXTURE, tmp_path / "scene")
+    broken = sequence / "48P" / "BaseColorDepth.0002.exr"
+    broken.write_bytes(broken.read_bytes()[:200])  # truncated
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "transform=dwt", "basis=haar", "temporal=none")
+    args = (f"ckpt_path={ckpt}", f"input={sequence}", f"output={tmp_path / 'up'}")
+    with pytest.raises(UpscaleError, match=f"frame 2 cannot be read: .*{broken}"):
+        upscale(compose_upscale(tmp_path, *args))
+    capsys.readouterr()
+    metrics = upscale(compose_upscale(tmp_path, *args, "on_error=skip"))
+    printed = capsys.readouterr()
+    assert f"frame 0002 SKIPPED, it cannot be read: cannot read EXR {broken}" in printed.out
+    assert "1 frame(s) SKIPPED" in printed.err and str(broken) in printed.err
+    assert sorted(p.name for p in (tmp_path / "up" / "png").iterdir()) == [
+        "0000.png",
+        "0001.png",
+        "0003.png",
+        "0004.png",
+    ]
+    assert list(json.loads((tmp_path / "up" / "upscale.json").read_text())["skipped"]) == ["2"]
+    assert "overall (4 frames)" in printed.out and np.isfinite(metrics["psnr"])
+
+
+def test_an_input_without_hr_colour_is_upscaled_in_its_own_layout(tmp_path):
+    """An engine's capture: HR G-buffers and LR colour only (no target), in DFASR's layout, a recurrent model."""
+    sequence = write_sequence(tmp_path / "capture", layout="dfasr", size=(24, 36), scales=(2,), frames=(1, 2, 3))
+    shutil.rmtree(sequence / "Nojitter-24P")  # no HR colour
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "variant=dfasr")
+    out = tmp_path / "up"
+    metrics = upscale(compose_upscale(tmp_path, f"ckpt_path={ckpt}", f"input={sequence}", f"output={out}"))
+    assert metrics == {}
+    colour = written(out, (1, 2, 3))
+    assert (out / "Nojitter-24P" / "SyntheticPreTonemapHDRColor.0002.exr").is_file()
+    assert all(c.shape == (3, 24, 36) and np.isfinite(c).all() for c in colour.values())
+
+
+@pytest.mark.slow
+def test_python_m_wdss_upscale_writes_a_side_by_side_video(tmp_path):
+    import av
+
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "transform=swt", "basis=haar")
+    args = (f"ckpt_path={ckpt}", f"input={FIXTURE}", "scale=2", "compare=true", f"paths.log_dir={tmp_path}")
+    done = run_module(tmp_path, "wdss.upscale", *args)
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = tmp_path / "upscale" / "fixture_000_2x"  # the default output folder
+    assert "overall (5 frames): PSNR" in done.stdout
+    with av.open(str(out / "fixture_000_2x.mp4")) as video:
+        frames = [frame.to_ndarray(format="rgb24") for frame in video.decode(video=0)]
+    assert len(frames) == 5 and frames[0].shape[1] == 2 * 96  # baseline | prediction
