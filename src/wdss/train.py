@@ -19,6 +19,7 @@ from typing import Any
 import hydra
 import lightning as L
 from hydra.core.hydra_config import HydraConfig
+from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
@@ -268,6 +269,20 @@ def _bench(cfg: DictConfig, module: Any, logger: Any) -> dict[str, float]:
     for key, value in values.items():
         logger.experiment.log_metric(logger.run_id, key, value)
     return values
+
+
+class ValidateBeforeRun(Callback):
+    """Hydra callback: :func:`validate` a single run's config before Hydra creates its output folder, so a bad
+    config leaves nothing behind (sweeps validate each job in :func:`train`, after their folders exist)."""
+
+    def on_run_start(self, config: DictConfig, **_: Any) -> None:
+        HydraConfig.instance().set_config(config)  # choices for validate(); Hydra sets it again for the job
+        task = OmegaConf.masked_copy(config, [k for k in config if k != "hydra"])
+        try:
+            validate(task)
+        except ConfigError as err:
+            print(f"wdss.train: {err}", file=sys.stderr)
+            raise SystemExit(2) from err
 
 
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="train")
