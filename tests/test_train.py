@@ -131,6 +131,7 @@ def test_every_option_of_every_group_composes(group, tmp_path):
         (["scale=arbitrary", "scale.train=[4,2]"], r"scale.train takes \[low, high\] with low <= high"),
         (["data.val_scale=0"], r"data.val_scale must lie in \[1, 8\], got 0"),
         (["ckpt_path=/etc/passwd"], r"ckpt_path: /etc/passwd is not a checkpoint"),
+        (["trainer=ddp_cpu", "trainer.use_distributed_sampler=true"], "trainer.use_distributed_sampler must be false"),
     ],
 )
 def test_invalid_combinations_are_one_clear_sentence(overrides, message, tmp_path):
@@ -197,7 +198,9 @@ def test_smoke_training_end_to_end_in_process(tmp_path, tracking):
     for key in ("val/psnr", "test/psnr_2x", "test/ssim_3x", "test/flip_4x", "bench/ms_per_frame", "bench/gflops"):
         assert key in metrics, key
     assert (tmp_path / "run" / "checkpoints" / "last.ckpt").exists()
-    runs = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
+    experiment = tracking.get_experiment_by_name("wdss")
+    assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"  # the UI opens on its runs
+    runs = tracking.search_runs([experiment.experiment_id])
     assert len(runs) == 1
     run = runs[0]
     assert run.info.status == "FINISHED"
@@ -228,6 +231,12 @@ def test_resume_from_last_continues_the_same_run(tmp_path, tracking):
     assert len(runs) == 1  # the resumed training logged into the same MLflow run
     steps = sorted(m.step for m in tracking.get_metric_history(runs[0].info.run_id, "train/loss"))
     assert steps == [0, 1, 2, 3]  # steps 0-1 from the first run, 2-3 after resuming: nothing trained twice
+
+
+def test_video_under_ddp_is_refused_before_any_run(tmp_path, tracking):
+    with pytest.raises(ConfigError, match="video=true needs one process"):
+        train(compose_train(["experiment=smoke", "trainer=ddp_cpu", "video=true"], tmp_path))
+    assert not (tmp_path / "run" / "mlflow_run_id").exists() and tracking.get_experiment_by_name("wdss") is None
 
 
 def test_runs_started_in_the_same_second_get_folders_of_their_own(monkeypatch):

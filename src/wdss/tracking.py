@@ -25,6 +25,7 @@ __all__ = [
     "PARENT_FILE",
     "RUN_ID_FILE",
     "SweepParentRun",
+    "ensure_experiment",
     "git_commit",
     "prepare_store",
     "reap_dead_runs",
@@ -33,6 +34,8 @@ __all__ = [
 ]
 
 PARENT_FILE = "mlflow_parent_run_id"  # in the sweep directory
+# MLflow 3's UI opens an experiment on its GenAI overview unless this tag says it holds model training runs.
+EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
 RUN_ID_FILE = "mlflow_run_id"  # in a run's output directory: lets ckpt_path=last resume the same run
 GROUPS = (
     "variant",
@@ -130,6 +133,27 @@ def prepare_store(tracking_uri: str) -> None:
         MlflowClient(tracking_uri)  # opens the store: creates and migrates the schema if the file is new
 
 
+def ensure_experiment(client: Any, name: str) -> str:
+    """The id of the experiment ``name``, created if it is new, tagged so that the UI opens it on its runs."""
+    from mlflow.exceptions import MlflowException
+
+    experiment = client.get_experiment_by_name(name)
+    if experiment is None:
+        try:
+            experiment_id = client.create_experiment(name)
+        except MlflowException:  # another job of the sweep created it first
+            experiment = client.get_experiment_by_name(name)
+            if experiment is None:
+                raise
+            experiment_id = experiment.experiment_id
+    else:
+        experiment_id = experiment.experiment_id
+    key, kind = EXPERIMENT_KIND
+    if experiment is None or experiment.tags.get(key) != kind:
+        client.set_experiment_tag(experiment_id, key, kind)
+    return experiment_id
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -168,9 +192,7 @@ class SweepParentRun(Callback):
         uri = _tracking_uri(config)
         prepare_store(uri)
         client = MlflowClient(uri)
-        name = str(OmegaConf.select(config, "experiment_name", default="wdss"))
-        experiment = client.get_experiment_by_name(name)
-        experiment_id = experiment.experiment_id if experiment else client.create_experiment(name)
+        experiment_id = ensure_experiment(client, str(OmegaConf.select(config, "experiment_name", default="wdss")))
         sweep_dir = Path(config.hydra.sweep.dir)
         sweep_dir.mkdir(parents=True, exist_ok=True)
         sweep_name = config.hydra.job.config_name

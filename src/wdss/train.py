@@ -25,9 +25,10 @@ from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 
 from wdss.checkpoint import CheckpointError, read_checkpoint
+from wdss.distributed import use_rank_command
 from wdss.paths import CONF_DIR
 from wdss.targets import TargetRefused, check_targets, instantiate
-from wdss.tracking import RUN_ID_FILE, prepare_store, reap_dead_runs, run_name, run_tags
+from wdss.tracking import RUN_ID_FILE, ensure_experiment, prepare_store, reap_dead_runs, run_name, run_tags
 
 __all__ = ["ConfigError", "main", "train", "validate"]
 
@@ -94,6 +95,13 @@ def validate(cfg: DictConfig) -> None:
             f"loss.space={space} compares images in {space} space, but the wavelet term would compare linear "
             "subbands (LL up to ~100x the image terms): set model.net.output_space=log (the head then predicts "
             "log1p-irradiance subbands) or loss.weights.wavelet=0"
+        )
+    if OmegaConf.select(cfg, "trainer") is not None and OmegaConf.select(
+        cfg, "trainer.use_distributed_sampler", default=True
+    ):
+        raise ConfigError(
+            "trainer.use_distributed_sampler must be false: under DDP wdss's EpochSampler gives each rank its share "
+            "of an epoch, and Lightning's sampler would share the shares out again"
         )
     temporal = OmegaConf.select(cfg, "temporal.name")
     if temporal != "recurrent" and OmegaConf.select(cfg, "loss.weights.temporal", default=0):
@@ -186,24 +194,37 @@ def train(cfg: DictConfig) -> dict[str, float]:
         )
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
     name = run_name(cfg)
-    uri = OmegaConf.select(cfg, "logger.tracking_uri")
-    if uri:
-        prepare_store(uri)
-        reap_dead_runs(uri, str(cfg.experiment_name))
-    tags = run_tags(cfg)
-    if hasattr(module.net, "needs_training"):  # which weights a pretrained-capable baseline reports with
-        tags["weights"] = f"published:{module.net.weights}" if module.net.weights else "trained-on-wdss-frames"
-    logger = instantiate(cfg.logger, run_name=name, tags=tags, run_id=resume_run)
-    if resume_run:  # a resumed run is this process's now
-        logger.experiment.set_tag(resume_run, "pid", str(os.getpid()))
-    (output_dir / "run_name").write_text(name)
-    (output_dir / RUN_ID_FILE).write_text(logger.run_id)
     callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [_progress_bar()]
     if cfg.get("video") and cfg.get("test"):
         from wdss.video import SequenceVideos
 
         callbacks.append(SequenceVideos(output_dir / "videos"))
-    trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks)
+    # Under DDP this function runs once per rank (rank 0 starts the others: wdss.distributed). The Trainer knows
+    # which rank this is, so it comes first: only rank 0 touches MLflow and writes the run's records.
+    use_rank_command("wdss.train")
+    trainer = instantiate(cfg.trainer, logger=False, callbacks=callbacks)
+    if cfg.get("video") and cfg.get("test") and trainer.world_size > 1:
+        raise ConfigError(
+            "video=true needs one process (under DDP each rank tests a share of the frames): test the checkpoint "
+            "with python -m wdss.eval ckpt_path=PATH video=true"
+        )
+    uri = OmegaConf.select(cfg, "logger.tracking_uri")
+    if uri and trainer.is_global_zero:
+        from mlflow import MlflowClient
+
+        prepare_store(uri)
+        reap_dead_runs(uri, str(cfg.experiment_name))
+        ensure_experiment(MlflowClient(uri), str(cfg.experiment_name))
+    tags = run_tags(cfg)
+    if hasattr(module.net, "needs_training"):  # which weights a pretrained-capable baseline reports with
+        tags["weights"] = f"published:{module.net.weights}" if module.net.weights else "trained-on-wdss-frames"
+    # Other ranks get the logger too, but MLFlowLogger creates its run and logs on rank 0 only.
+    trainer.logger = logger = instantiate(cfg.logger, run_name=name, tags=tags, run_id=resume_run)
+    if trainer.is_global_zero:
+        if resume_run:  # a resumed run is this process's now
+            logger.experiment.set_tag(resume_run, "pid", str(os.getpid()))
+        (output_dir / "run_name").write_text(name)
+        (output_dir / RUN_ID_FILE).write_text(logger.run_id)
 
     resolved = OmegaConf.to_container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]), resolve=True)
     if resume_run is None:
@@ -226,7 +247,8 @@ def train(cfg: DictConfig) -> dict[str, float]:
             best = getattr(trainer.checkpoint_callback, "best_model_path", "") if fitting else ""
             trainer.test(module, datamodule=datamodule, ckpt_path=best or None, weights_only=True)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")})
-        metrics.update(_bench(cfg, module, logger))
+        if trainer.is_global_zero:
+            metrics.update(_bench(cfg, module, logger))
     except BaseException as error:
         stopped_by = _stopped_by(error)
         if stopped_by is None:

@@ -347,3 +347,30 @@ def test_patches_per_frame_draws_every_frame_that_often_with_distinct_randomness
     assert list(again) == draws  # a function of (seed, epoch) alone: resume replays it
     with pytest.raises(ValueError, match="patches_per_frame"):
         EpochSampler(5, repeats=0)
+
+
+def test_two_ddp_ranks_share_every_epoch_disjointly_as_a_function_of_seed_and_epoch_alone():
+    from wdss.data.dataset import EpochSampler
+
+    def shares(epoch: int, shuffle: bool = True, size: int = 7, repeats: int = 3) -> list[list[tuple[int, int]]]:
+        out = []
+        for rank in (0, 1):
+            sampler = EpochSampler(size, seed=3, shuffle=shuffle, repeats=repeats, rank=rank, world_size=2)
+            sampler.set_epoch(epoch)
+            out.append(list(sampler))
+            assert len(out[-1]) == len(sampler)
+        return out
+
+    one = EpochSampler(7, seed=3, repeats=3)
+    one.set_epoch(4)
+    first, second = shares(4)
+    assert len(first) == len(second) == 10  # 21 draws: one left out, so both ranks step the same batches
+    assert not set(first) & set(second)
+    assert set(first) | set(second) < set(one)  # one process's epoch, less the remainder
+    assert [d for pair in zip(first, second, strict=True) for d in pair] == list(one)[:20]  # alternate draws
+    assert shares(4) == [first, second]  # a function of (seed, epoch): a resumed DDP run replays its shares
+    assert shares(5) != [first, second]
+    # Evaluation: contiguous blocks in order, together every frame once (a mean over ranks is one process's).
+    assert shares(0, shuffle=False, size=5, repeats=1) == [[(0, 0), (1, 0)], [(2, 0), (3, 0), (4, 0)]]
+    with pytest.raises(ValueError, match="1 samples cannot be shared among 2 processes"):
+        EpochSampler(1, world_size=2, rank=0)

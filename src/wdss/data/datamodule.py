@@ -170,13 +170,22 @@ class SceneDataModule(L.LightningDataModule):
     def _loader(self, dataset: FrameDataset, batch_size: int, *, train: bool) -> DataLoader:
         # Evaluation keeps frames in order, so a recurrent model can feed back its previous output.
         generator = torch.Generator().manual_seed(self.seed) if train else None
+        # Under DDP each rank loads its own share (EpochSampler); the trainer config turns Lightning's sampler off.
+        trainer = self.trainer
+        rank, world_size = (trainer.global_rank, trainer.world_size) if trainer is not None else (0, 1)
+        sampler = EpochSampler(
+            len(dataset),
+            self.seed,
+            shuffle=train,
+            repeats=self.patches_per_frame if train else 1,
+            rank=rank,
+            world_size=world_size,
+        )
         return DataLoader(
             dataset,
             batch_size=batch_size,
-            sampler=EpochSampler(
-                len(dataset), self.seed, shuffle=train, repeats=self.patches_per_frame if train else 1
-            ),
-            drop_last=train and len(dataset) * self.patches_per_frame >= batch_size,
+            sampler=sampler,
+            drop_last=train and len(sampler) >= batch_size,
             num_workers=self.num_workers,
             pin_memory=self.pin_memory,
             persistent_workers=self.num_workers > 0,

@@ -389,23 +389,44 @@ class EpochSampler(Sampler):
     through the dataset's per-sample generators, the crops, flips and scales) of an uninterrupted run.
     ``repeats``: each item is drawn that many times per epoch (several patches per frame of a small dataset),
     each draw with its own randomness: ``draw = epoch * repeats + r``.
+
+    Under DDP, ``rank`` of ``world_size`` processes takes its own share of every epoch, so the shares are disjoint
+    and still a function of (seed, epoch) alone (a resume replays them): shuffled, every ``world_size``-th draw of
+    the one permutation from position ``rank``, the remainder of the division left out so that every rank steps
+    the same number of batches (DDP synchronises every step); in order (evaluation), a contiguous block, so that a
+    sequence's frames stay consecutive (a recurrent model and the temporal metrics pair each frame with the one
+    before; only a pair cut by a block's start is lost).
     """
 
-    def __init__(self, size: int, seed: int = 0, shuffle: bool = True, repeats: int = 1) -> None:
+    def __init__(
+        self, size: int, seed: int = 0, shuffle: bool = True, repeats: int = 1, rank: int = 0, world_size: int = 1
+    ) -> None:
         if repeats < 1:
             raise ValueError(f"data.patches_per_frame must be >= 1, got {repeats}")
+        if not 0 <= rank < world_size:
+            raise ValueError(f"rank {rank} is not one of {world_size} processes")
+        if size * repeats < world_size:  # an empty share: that rank would never reach the others' collectives
+            raise ValueError(f"{size * repeats} samples cannot be shared among {world_size} processes")
         self.size, self.seed, self.shuffle, self.epoch, self.repeats = size, seed, shuffle, 0, repeats
+        self.rank, self.world_size = rank, world_size
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = epoch
 
+    def _block(self) -> range:
+        total = self.size * self.repeats
+        return range(total * self.rank // self.world_size, total * (self.rank + 1) // self.world_size)
+
     def __len__(self) -> int:
-        return self.size * self.repeats
+        return self.size * self.repeats // self.world_size if self.shuffle else len(self._block())
 
     def __iter__(self):
-        order = range(len(self))
         if self.shuffle:
-            order = torch.randperm(len(self), generator=torch.Generator().manual_seed(_mix(self.seed, self.epoch, 0)))
+            total = self.size * self.repeats
+            order = torch.randperm(total, generator=torch.Generator().manual_seed(_mix(self.seed, self.epoch, 0)))
+            order = order[: total - total % self.world_size][self.rank :: self.world_size]
+        else:
+            order = self._block()
         return iter([(int(v) % self.size, self.epoch * self.repeats + int(v) // self.size) for v in order])
 
 

@@ -230,21 +230,32 @@ class SuperResolutionModule(L.LightningModule):
         else:
             values = self.metrics(out["color"].float(), batch["target"].float())
         n = batch["target"].shape[0]
+        # sync_dist: under DDP each rank evaluates its share of the frames; Lightning reduces a mean as the sum of
+        # the ranks' batch-size-weighted sums over their summed batch sizes, so the value is that of one process.
+        # Every rank must log the same names (each name is one collective), hence psnr_infinite even when 0.
         for name, per_image in values.items():
             finite = per_image[torch.isfinite(per_image)]
             # Identical images have infinite PSNR: average the finite ones, and say so with a count.
-            if name == "psnr" and finite.numel() < per_image.numel():
+            if name == "psnr":
                 self.log(
                     f"{stage}/psnr_infinite{suffix}",
                     float(per_image.numel() - finite.numel()),
                     reduce_fx="sum",
                     batch_size=n,
                     add_dataloader_idx=False,
+                    sync_dist=True,
                 )
             value = finite.mean() if finite.numel() else per_image.mean()
-            self.log(f"{stage}/{name}{suffix}", value, batch_size=n, add_dataloader_idx=False, prog_bar=name == "psnr")
+            self.log(
+                f"{stage}/{name}{suffix}",
+                value,
+                batch_size=n,
+                add_dataloader_idx=False,
+                prog_bar=name == "psnr",
+                sync_dist=True,
+            )
         if stage == "val":
-            self.log("val/loss", self._loss(batch, out)["total"], batch_size=n)
+            self.log("val/loss", self._loss(batch, out)["total"], batch_size=n, sync_dist=True)
         return out
 
     def validation_step(self, batch: Mapping[str, Any], batch_idx: int) -> None:
@@ -290,10 +301,24 @@ class SuperResolutionModule(L.LightningModule):
     def on_test_epoch_end(self) -> None:
         """Log the temporal metrics of every scale (means over sequences) and, per sequence, each frame's PSNR and
         warping error as MLflow metric histories ``frames/<sequence>/psnr_<s>x`` with the frame index as step."""
-        for label, stability in self._stability.items():
+        for label, stability in self._pooled_stability().items():
             for name, value in stability.compute().items():
-                self.log(f"test/{name}_{label}", value, add_dataloader_idx=False)
+                self.log(f"test/{name}_{label}", value, add_dataloader_idx=False, sync_dist=True)
             self._log_frame_metrics(label, stability)
+
+    def _pooled_stability(self) -> dict[str, TemporalStability]:
+        """Every rank's temporal sums pooled (under DDP each rank saw a block of the frames), the same on all ranks."""
+        if self.trainer.world_size == 1:
+            return self._stability
+        import torch.distributed as dist
+
+        shares: list[dict[str, dict]] = [{} for _ in range(self.trainer.world_size)]
+        dist.all_gather_object(shares, {label: s.sequences for label, s in self._stability.items()})
+        pooled: dict[str, TemporalStability] = {}
+        for share in shares:  # in rank order: every rank pools, and then logs, the same names in the same order
+            for label, sequences in share.items():
+                pooled.setdefault(label, TemporalStability()).add(sequences)
+        return pooled
 
     def _log_frame_metrics(self, label: str, stability: TemporalStability) -> None:
         experiment, run_id = getattr(self.logger, "experiment", None), getattr(self.logger, "run_id", None)

@@ -117,6 +117,16 @@ class TemporalStability:
         sums.frames.append((frame, float(psnr(prediction, target)[0]), twe, twe_target))
         self._previous = (sequence, frame, prediction, target, current)
 
+    def add(self, sequences: dict[str, _Sums]) -> None:
+        """Pool the sums of another share of the frames (a DDP rank's block of the sequences) into these."""
+        for name, other in sequences.items():
+            sums = self.sequences.setdefault(name, _Sums())
+            sums.error += other.error
+            sums.target_error += other.target_error
+            sums.squared += other.squared
+            sums.count += other.count
+            sums.frames = sorted(sums.frames + other.frames)
+
     def per_sequence(self) -> dict[str, dict[str, float]]:
         """``twe``, ``twe_target``, ``twe_ratio`` and ``tpsnr`` of each sequence that had a valid frame pair."""
         out = {}
