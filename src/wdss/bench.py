@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m wdss.bench wavelets|data|model|stability|render``.
+"""Benchmarks: ``python -m wdss.bench wavelets|data|model|inference|stability|render``.
 
 Every benchmark reports medians of repeated runs and ratios measured in the same process, never absolute
 targets: timing on shared machines is noisy, so comparisons are only made within one run.
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
 from collections.abc import Callable, Sequence
 
@@ -16,6 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 BASES = ("haar", "db4", "sym4")
+TABLE_WIDTH = 160  # columns of a table printed off a terminal
 
 
 def median_ms(fn: Callable[[], object], *, repeats: int, warmup: int = 1) -> float:
@@ -161,6 +163,17 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     return table
 
 
+# DFASR as a WDSSNet (conf/model/dfasr.yaml): the full LR grid, its G-buffer subset, its fusion and phase.
+DFASR = dict(
+    transform="none",
+    lr_unshuffle=False,
+    gbuffer_channels=[3, 4, 5, 6, 0, 1, 2],
+    fusion_final_relu=True,
+    phase_bias=False,
+    final_relu=False,
+)
+
+
 def comparison_models(widths: str) -> dict:
     """DFASR, Real-ESRGAN, NSRR and FuseSR (x2) at the given widths, for the inference table."""
     from wdss.model.fusesr import FuseSR
@@ -168,21 +181,111 @@ def comparison_models(widths: str) -> dict:
     from wdss.model.nsrr import NSRR
     from wdss.model.rrdbnet import RRDBNet
 
-    dfasr = dict(
-        transform="none",
-        lr_unshuffle=False,
-        gbuffer_channels=[3, 4, 5, 6, 0, 1, 2],
-        fusion_final_relu=True,
-        phase_bias=False,
-        final_relu=False,
-    )
     small = widths != "paper"
     return {
-        "DFASR": WDSSNet(**dfasr, **(WIDTHS["small"] if small else {})),
+        "DFASR": WDSSNet(**DFASR, **(WIDTHS["small"] if small else {})),
         "Real-ESRGAN": RRDBNet(scale=2, **(dict(num_feat=32, num_block=4, num_grow_ch=16) if small else {})),
         "NSRR": NSRR(),
         "FuseSR": FuseSR(scale=2),
     }
+
+
+# --------------------------------------------------------------------------------------------------------
+# inference, as engines run it
+# --------------------------------------------------------------------------------------------------------
+
+INFERENCE_CONFIGS = {
+    "none": dict(transform="none"),
+    "DWT-haar": dict(transform="dwt", basis="haar"),
+    "SWT-db4": dict(transform="swt", basis="db4"),
+    "DFASR": DFASR,
+}
+BACKENDS = ("eager", "compile", "onnxruntime")
+
+
+def _inference_runners(
+    net: torch.nn.Module, height: int, width: int, scale: float, backends: Sequence[str], tmp: str
+) -> tuple[dict[str, Callable[[], object]], dict[str, float]]:
+    """A zero-argument callable per backend, all on the same example inputs and weights, and each one's
+    max |difference| / max against eager's colour."""
+    import numpy as np
+    import onnxruntime
+
+    from wdss.export import export_onnx, relative_error
+    from wdss.model.module import SuperResolutionModule
+
+    # The export folds RIR blocks in place and returns the graph every backend runs: network + remodulation.
+    graph, inputs, reference = export_onnx(
+        SuperResolutionModule(net), f"{tmp}/model.onnx", height=height, width=width, scale=scale
+    )
+    runners: dict[str, Callable[[], object]] = {}
+    for backend in backends:
+        if backend == "onnxruntime":
+            options = onnxruntime.SessionOptions()
+            options.intra_op_num_threads = torch.get_num_threads()  # torch's threads: the same cores for all
+            session = onnxruntime.InferenceSession(f"{tmp}/model.onnx", options, providers=["CPUExecutionProvider"])
+            feed = {k: v.numpy() for k, v in inputs.items()}
+            runners[backend] = lambda s=session, f=feed: torch.from_numpy(s.run(["color"], f)[0])
+        else:
+            module = torch.compile(graph) if backend == "compile" else graph
+            runners[backend] = lambda m=module: m(inputs)[0]
+    with torch.inference_mode():  # the first call also compiles
+        errors = {backend: relative_error(np.asarray(run()), reference.numpy()) for backend, run in runners.items()}
+    return runners, errors
+
+
+def bench_inference(
+    size: tuple[int, int],
+    scale: float,
+    repeats: int,
+    configs: Sequence[str] = tuple(INFERENCE_CONFIGS),
+    backends: Sequence[str] = BACKENDS,
+    warmup: int = 1,
+) -> Table:
+    """Milliseconds per output frame of every configuration on every backend (CPU, paper widths), as an engine
+    runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode.
+
+    All (configuration, backend) pairs are built first and then timed in rounds, each round running every pair
+    once in the same order (A B C A B C ...), so that a slow spell of a shared machine hits every pair alike.
+    Ratios are medians of the per-round ratios (paired), times medians of the rounds.
+    """
+    import tempfile
+
+    from wdss.model.network import WDSSNet
+
+    height, width = size
+    with tempfile.TemporaryDirectory() as tmp:
+        built = {}
+        for name in configs:
+            net = WDSSNet(**INFERENCE_CONFIGS[name]).eval()
+            built[name] = _inference_runners(net, height, width, scale, backends, f"{tmp}/{name}")
+    runners = {(name, backend): built[name][0][backend] for name in configs for backend in backends}
+    times: dict[tuple[str, str], list[float]] = {pair: [] for pair in runners}
+    with torch.inference_mode():
+        for _ in range(warmup):
+            for run in runners.values():
+                run()
+        for _ in range(repeats):
+            for pair, run in runners.items():
+                start = time.perf_counter()
+                run()
+                times[pair].append((time.perf_counter() - start) * 1e3)
+
+    def paired(a: tuple[str, str], b: tuple[str, str]) -> float:
+        return statistics.median(x / y for x, y in zip(times[a], times[b], strict=True))
+
+    threads = torch.get_num_threads()
+    table = Table(title=f"ms per {width}x{height} frame at {scale:g}x, CPU, {threads} threads, {repeats} rounds")
+    for column in ("model", "backend", "ms / frame", "time / eager", "time / none", "max rel. error"):
+        table.add_column(column, justify="left" if column in ("model", "backend") else "right")
+    for name, backend in runners:
+        eager = f"{paired((name, backend), (name, 'eager')):.3f}" if "eager" in backends else "-"
+        none = f"{paired((name, backend), ('none', backend)):.3f}" if "none" in configs else "-"
+        table.add_row(
+            name, backend, f"{statistics.median(times[name, backend]):.1f}", eager, none,
+            f"{built[name][1][backend]:.1e}",
+        )  # fmt: skip
+    return table
 
 
 def bench_stability() -> Table:
@@ -264,6 +367,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     model.add_argument("--repeats", type=int, default=3)
     model.add_argument("--widths", choices=("paper", "small"), default="paper")
     model.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    inf = sub.add_parser("inference", help="ms per frame on torch eager, torch.compile and onnxruntime (CPU)")
+    inf.add_argument("--size", type=int, nargs=2, default=(1080, 1920), metavar=("H", "W"))
+    inf.add_argument("--scale", type=float, default=2.0)
+    inf.add_argument("--repeats", type=int, default=10)
+    inf.add_argument("--configs", nargs="+", choices=list(INFERENCE_CONFIGS), default=list(INFERENCE_CONFIGS))
+    inf.add_argument("--backends", nargs="+", choices=list(BACKENDS), default=list(BACKENDS))
+    inf.add_argument("--threads", type=int, default=None, help="CPU threads of every backend (default: torch's)")
     sub.add_parser("stability", help="stiff and extreme cases: worst relative error, finiteness")
     ren = sub.add_parser("render", help="rendered colour at a few sample counts against a high-sample reference")
     ren.add_argument("--seeds", type=int, nargs="+", default=[101, 200])  # training and validation scenes of mini
@@ -273,7 +383,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     ren.add_argument("--reference", type=int, default=512)
     args = parser.parse_args(argv)
 
-    console = Console()
+    # Off a terminal (a pipe, a log file) rich would wrap every cell at 80 columns: print tables whole.
+    console = Console() if sys.stdout.isatty() else Console(width=TABLE_WIDTH)
     if args.what == "wavelets":
         console.print(bench_wavelets(args.shape, args.repeats, args.device, args.bases))
     elif args.what == "data":
@@ -284,6 +395,10 @@ def main(argv: Sequence[str] | None = None) -> None:
         console.print(bench_render(args.seeds, args.frame, tuple(args.size), args.samples, args.reference))
     elif args.what == "model":
         console.print(bench_model(tuple(args.size), args.scale, args.repeats, args.device, args.widths))
+    elif args.what == "inference":
+        if args.threads:
+            torch.set_num_threads(args.threads)
+        console.print(bench_inference(tuple(args.size), args.scale, args.repeats, args.configs, args.backends))
 
 
 if __name__ == "__main__":

@@ -1,0 +1,48 @@
+"""wdss.bench: the inference table (every backend, paired ratios) and tables printed whole off a terminal."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from rich.table import Table
+
+from wdss import bench
+
+
+def table_rows(text: str) -> dict[tuple[str, str], list[str]]:
+    """The body rows of a printed rich table by their first two cells (rows wrapped over lines would split)."""
+    rows = {}
+    for line in text.splitlines():
+        cells = [c.strip() for c in re.split(r"[│┃]", line)[1:-1]]
+        if len(cells) > 2 and cells[0] and cells[1]:
+            rows[cells[0], cells[1]] = cells[2:]
+    return rows
+
+
+def test_tables_print_whole_off_a_terminal(monkeypatch, capsys):
+    """Off a terminal rich wraps at 80 columns: a wide table (as bench model's) kept one line per row."""
+    table = Table(title="wide")
+    for column in ("transform", "basis", "head", "params", "GFLOPs", "synthesis", "ms", "time / none", "FLOPs / none"):
+        table.add_column(column)
+    table.add_row("swt", "db4", "shared_inr", "0.575 M", "135.7", "0.33%", "3512", "1.135", "1.092")
+    monkeypatch.setattr(bench, "bench_model", lambda *args: table)
+    bench.main(["model"])
+    rows = table_rows(capsys.readouterr().out)
+    assert rows["swt", "db4"] == ["shared_inr", "0.575 M", "135.7", "0.33%", "3512", "1.135", "1.092"]
+
+
+@pytest.mark.slow  # torch.compile and the ONNX export of every configuration: ~1 min
+def test_inference_table_times_every_backend_with_ratios(capsys):
+    bench.main(["inference", "--size", "16", "32", "--repeats", "2", "--configs", "none", "SWT-db4", "--threads", "1"])
+    out = capsys.readouterr().out
+    assert "ms per 32x16 frame at 2x, CPU, 1 threads, 2 rounds" in out
+    rows = table_rows(out)
+    assert {backend for _, backend in rows} - {"backend"} == {"eager", "compile", "onnxruntime"}
+    for name in ("none", "SWT-db4"):
+        for backend in bench.BACKENDS:
+            ms, to_eager, to_none, error = rows[name, backend]
+            assert float(ms) > 0 and float(to_none) > 0
+            assert float(to_eager) == 1.0 if backend == "eager" else float(to_eager) > 0
+            assert float(error) <= 1e-4  # every backend computes the eager colour
+        assert float(rows["none", backend][2]) == 1.0
