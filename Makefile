@@ -9,7 +9,7 @@ PY := $(VENV)/bin/python
 PIP_INSTALL := $(PY) -m pip install --disable-pip-version-check -q -c constraints.txt
 export MLFLOW_DISABLE_TELEMETRY ?= true
 
-.PHONY: help setup setup-render test test-fast lint format train ui bench data clean
+.PHONY: help setup setup-render setup-cluster test test-fast lint format train ui server bench data clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | sort | \
@@ -28,10 +28,16 @@ $(VENV)/.installed-render: $(VENV)/.installed
 	$(PIP_INSTALL) -e '.[dev,export,render]'
 	touch $@
 
+setup-cluster: $(VENV)/.installed-cluster ## also install the `cluster` extra (submitit launcher, PostgreSQL driver)
+
+$(VENV)/.installed-cluster: $(VENV)/.installed
+	$(PIP_INSTALL) -e '.[dev,export,cluster]'
+	touch $@
+
 data: setup-render ## render the default dataset (data/mini, a few minutes) ahead of training
 	$(PY) -m wdss.render -cn mini
 
-test: setup-render ## run the whole test suite, slow (rendering) tests included
+test: setup-render setup-cluster ## run the whole test suite, slow (rendering, DDP, server, launcher) tests included
 	$(PY) -m pytest
 
 test-fast: setup ## run the tests not marked slow
@@ -57,6 +63,17 @@ ifneq ($(filter http://% https://%,$(TRACKING_URI)),)
 else
 	$(VENV)/bin/mlflow ui --backend-store-uri '$(TRACKING_URI)' --host 127.0.0.1 --port 5000
 endif
+
+# A tracking server for several people or machines (README: "A team tracking server"): runs log to it over HTTP
+# (MLFLOW_TRACKING_URI=http://127.0.0.1:$(SERVER_PORT)) and upload their artifacts through it (proxied) into
+# SERVER_ARTIFACTS. Its own SQLite file: runs of mlflow.db keep their local artifact paths. PostgreSQL: README.
+SERVER_STORE ?= sqlite:///$(CURDIR)/mlflow-server.db
+SERVER_ARTIFACTS ?= $(CURDIR)/mlartifacts
+SERVER_PORT ?= 5000
+SERVER_WORKERS ?= 2
+
+server: setup ## an MLflow tracking server on http://127.0.0.1:5000 (SQLite store, artifacts proxied to mlartifacts/)
+	$(VENV)/bin/mlflow server --backend-store-uri '$(SERVER_STORE)' --artifacts-destination '$(SERVER_ARTIFACTS)' --host 127.0.0.1 --port $(SERVER_PORT) --workers $(SERVER_WORKERS)
 
 bench: setup ## benchmarks: wavelet transforms against ptwt, data loading, model inference
 	$(PY) -m wdss.bench wavelets

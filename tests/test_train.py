@@ -52,9 +52,12 @@ def compose_train(overrides: list[str], tmp_path: Path | None = None, config_dir
     return cfg
 
 
-def run_module(tmp_path: Path, module: str, *args: str, timeout: int = 600) -> subprocess.CompletedProcess:
-    """``python -m <module> args`` in the project root, tracking to a temporary SQLite file."""
-    env = {**os.environ, "MLFLOW_TRACKING_URI": f"sqlite:///{tmp_path}/mlflow.db", "MLFLOW_DISABLE_TELEMETRY": "true"}
+def run_module(
+    tmp_path: Path, module: str, *args: str, timeout: int = 600, tracking: str | None = None
+) -> subprocess.CompletedProcess:
+    """``python -m <module> args`` in the project root, tracking to ``tracking``, else a temporary SQLite file."""
+    uri = tracking or f"sqlite:///{tmp_path}/mlflow.db"
+    env = {**os.environ, "MLFLOW_TRACKING_URI": uri, "MLFLOW_DISABLE_TELEMETRY": "true"}
     return subprocess.run(
         [sys.executable, "-m", module, *args],
         cwd=PROJECT_ROOT,
@@ -458,7 +461,9 @@ def test_eval_against_a_store_without_the_training_run_makes_a_tagged_run(tmp_pa
     evaluate(eval_config(ckpt, tmp_path / "eval"))
     assert f"the training run {trained.info.run_id} of {ckpt} is not in {other}" in capsys.readouterr().out
     client = MlflowClient(other)
-    [evaluation] = client.search_runs([client.get_experiment_by_name("wdss").experiment_id])
+    experiment = client.get_experiment_by_name("wdss")
+    assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
+    [evaluation] = client.search_runs([experiment.experiment_id])
     assert evaluation.info.status == "FINISHED" and "test/psnr_2x" in evaluation.data.metrics
     tags = evaluation.data.tags
     assert tags["training_run_id"] == trained.info.run_id and tags["ckpt_path"] == str(ckpt.resolve())

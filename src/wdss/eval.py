@@ -22,7 +22,7 @@ from wdss.data.exr import write_exr
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
 from wdss.targets import check_targets, instantiate
-from wdss.tracking import RUN_ID_FILE, prepare_store
+from wdss.tracking import RUN_ID_FILE, ensure_experiment, prepare_store
 
 __all__ = ["WritePredictions", "evaluate", "main"]
 
@@ -91,6 +91,7 @@ def _eval_logger(cfg: DictConfig, ckpt: Path) -> Any:
         else:
             tags["mlflow.parentRunId"] = training
             experiment_name = client.get_experiment(run.info.experiment_id).name  # the UI nests within one
+    ensure_experiment(client, experiment_name)
     return instantiate(cfg.logger, experiment_name=experiment_name, run_name=f"eval {ckpt.name}", tags=tags)
 
 
