@@ -8,10 +8,38 @@ import math
 from pathlib import Path
 
 import pytest
+from hydra.core.hydra_config import HydraConfig
 
 from tests.test_train import compose_train, run_module
+from wdss.paths import CONF_DIR, PROJECT_ROOT
 
-pytestmark = pytest.mark.slow
+
+def test_other_ranks_run_the_job_alone_in_its_folder_and_paths_survive_hydra_quoting(tmp_path, monkeypatch):
+    from hydra.conf import ConfigSourceInfo
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from omegaconf import open_dict, read_write
+
+    from wdss.distributed import rank_command
+
+    cfg = compose_train(["experiment=smoke", "seed=1"], config_dir=PROJECT_ROOT / "sweeps", name="ablation_wavelet")
+    folder = str(tmp_path / "it's a job, = 0")
+    with read_write(cfg.hydra), open_dict(cfg.hydra):  # what Hydra sets when it runs the job
+        cfg.hydra.runtime.output_dir = folder
+        cfg.hydra.runtime.config_sources = [  # as a run of `-cd sweeps -cn ablation_wavelet` records them
+            ConfigSourceInfo(path="hydra.conf", schema="pkg", provider="hydra"),
+            ConfigSourceInfo(path=str(CONF_DIR), schema="file", provider="main"),
+            ConfigSourceInfo(path=str(PROJECT_ROOT / "sweeps"), schema="file", provider="command-line"),
+        ]
+        cfg.hydra.runtime.cwd = str(tmp_path)
+    HydraConfig.instance().set_config(cfg)
+    command, cwd = rank_command("wdss.train", 1)
+    assert command[1:3] == ["-m", "wdss.train"] and cwd == str(tmp_path) and "--multirun" not in command
+    assert command[command.index("--config-path") + 1] == str(CONF_DIR)
+    assert command[command.index("--config-dir") + 1] == str(PROJECT_ROOT / "sweeps")
+    assert command[command.index("--config-name") + 1] == "ablation_wavelet"
+    assert {"experiment=smoke", "seed=1", "hydra.mode=RUN", "hydra.output_subdir=null"} <= set(command)
+    [run_dir] = [arg for arg in command if arg.startswith("hydra.run.dir=")]
+    assert OverridesParser.create().parse_overrides([run_dir])[0].value() == folder
 
 
 def one_process_metrics(tmp_path: Path, ckpt: Path) -> dict[str, float]:
@@ -31,6 +59,7 @@ def one_process_metrics(tmp_path: Path, ckpt: Path) -> dict[str, float]:
     return metrics
 
 
+@pytest.mark.slow
 def test_ddp_on_two_cpu_processes_logs_once_reduces_over_ranks_and_resumes(tmp_path):
     from mlflow import MlflowClient
 

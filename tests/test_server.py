@@ -9,6 +9,7 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
 import time
 import urllib.request
 from collections.abc import Iterator
@@ -74,8 +75,15 @@ def test_runs_sweeps_artifacts_and_the_report_through_a_tracking_server(server, 
     from mlflow import MlflowClient
 
     outputs = f"paths.log_dir={tmp_path}/outputs"
-    done = run_module(tmp_path, "wdss.train", "experiment=smoke", "test=false", "bench=null", outputs, tracking=server)
-    assert done.returncode == 0, done.stderr[-3000:]
+    env = {**os.environ, "MLFLOW_TRACKING_URI": server, "MLFLOW_DISABLE_TELEMETRY": "true"}
+    training = subprocess.Popen(  # beside the sweep: two clients of the server at once
+        [sys.executable, "-m", "wdss.train", "experiment=smoke", "test=false", "bench=null", outputs],
+        cwd=PROJECT_ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     done = run_module(
         tmp_path,
         "wdss.train",
@@ -90,6 +98,8 @@ def test_runs_sweeps_artifacts_and_the_report_through_a_tracking_server(server, 
         tracking=server,
     )
     assert done.returncode == 0, done.stderr[-3000:]
+    _, errors = training.communicate(timeout=600)
+    assert training.returncode == 0, errors[-3000:]
     report = run_module(
         tmp_path, "wdss.report", "--sweep", "ablation_wavelet", "--out", f"{tmp_path}/reports", tracking=server
     )
