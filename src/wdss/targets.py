@@ -36,6 +36,7 @@ ALLOWED: Mapping[str, tuple[str, ...]] = {
     "wdss.data": ("SceneDataModule",),
     "wdss.render": ("render_preset",),
     "wdss.tracking": ("SweepParentRun",),
+    "wdss.train": ("ValidateBeforeRun",),
     # optimisers and learning-rate schedulers (not LambdaLR/MultiplicativeLR: they take a function)
     "torch.optim": ("SGD", "Adam", "AdamW", "Adamax", "Adagrad", "Adadelta", "RMSprop", "NAdam", "RAdam"),
     "torch.optim.lr_scheduler": (

@@ -4,8 +4,9 @@ The image terms compare colour in one space: ``linear`` HDR (the paper), ``log``
 ``tonemapped`` (the metric's display transform, so the loss weighs errors as PSNR/SSIM/FLIP will).
 Terms: ``wavelet`` (L1 between predicted coefficients and the analysis of the target irradiance, in the space
 the network's head predicts in: see ``WDSSNet.target_coefficients``),
-``l1``, ``l2`` (mean squared error: its minimiser is the conditional mean, what PSNR rewards; L1's is the median,
-which is the upsampler itself wherever the correction is small against the target's sampling noise), ``ssim`` (1 - SSIM), ``masked_l1`` (L1 inside the spatial mask), ``temporal`` (the change between
+``l1``, ``l2`` (mean squared error: its minimiser is the conditional mean, what PSNR rewards; L1's is the
+median, which is the upsampler itself wherever the correction is small against the target's sampling noise),
+``ssim`` (1 - SSIM), ``masked_l1`` (L1 inside the spatial mask), ``temporal`` (the change between
 consecutive outputs against the change between consecutive targets, both previous frames warped; it needs
 the previous prediction and does not collapse to plain L1), ``lpips`` (only with local backbone weights).
 """
