@@ -6,6 +6,7 @@ import itertools
 
 import pytest
 import torch
+from torch.utils._python_dispatch import TorchDispatchMode
 
 from tests.model.helpers import TINY, batch
 from wdss.model.blocks import RIRBlock
@@ -71,3 +72,30 @@ def test_rir_blocks_fold_into_one_convolution_exactly():
     torch.testing.assert_close(block(x), before)
     net = WDSSNet("swt", "haar", gbuffer_block="rir", **TINY)
     assert any(isinstance(m, RIRBlock) for m in net.modules())
+
+
+class _Ops(TorchDispatchMode):
+    """Records every aten call with its arguments."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls: list[tuple[str, tuple]] = []
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        self.calls.append((str(func.overloadpacket), args))
+        return func(*args, **(kwargs or {}))
+
+
+@pytest.mark.parametrize("transform", ["none", "swt"])
+def test_eager_inference_copies_nothing_it_does_not_need(transform):
+    """Eager CPU speed (python -m wdss.bench inference): an even frame is not copied by a zero padding, one INR MLP's
+    output is not concatenated, and the SWT exit convolution and synthesis on full-resolution channels run
+    channels-last (oneDNN's fast layout for them)."""
+    net = WDSSNet(transform, "db4", **TINY).eval()
+    data = batch(size=(16, 20))
+    with torch.no_grad(), _Ops() as ops:
+        run(net, data)
+    assert not [name for name, _ in ops.calls if "pad" in name]
+    assert not [args for name, args in ops.calls if name == "aten.cat" and len(args[0]) == 1]
+    full = [args[0] for name, args in ops.calls if name == "aten.convolution" and args[0].shape[-2] >= 16]
+    assert full and all(x.is_contiguous(memory_format=torch.channels_last) for x in full) == (transform == "swt")
