@@ -38,7 +38,7 @@ data: setup-render ## render the default dataset (data/mini, a few minutes) ahea
 	$(PY) -m wdss.render -cn mini
 
 test: setup-render setup-cluster ## run the whole test suite, slow (rendering, DDP, server, launcher) tests included
-	$(PY) -m pytest
+	$(PY) -m pytest -n auto
 
 test-fast: setup ## run the tests not marked slow
 	$(PY) -m pytest -m "not slow"
