@@ -32,6 +32,15 @@ def test_tables_print_whole_off_a_terminal(monkeypatch, capsys):
     assert rows["swt", "db4"] == ["shared_inr", "0.575 M", "135.7", "0.33%", "3512", "1.135", "1.092"]
 
 
+def test_runners_are_timed_in_interleaved_rounds_each_starting_one_later():
+    calls = []
+    runners = {key: (lambda k=key: calls.append(k)) for key in "abc"}
+    times = bench.interleaved_ms(runners, repeats=4, warmup=1)
+    assert "".join(calls) == "abc" + "abc" + "bca" + "cab" + "abc"
+    assert {k: len(v) for k, v in times.items()} == {"a": 4, "b": 4, "c": 4}
+    assert bench.paired_ratio([2.0, 9.0, 4.0], [1.0, 3.0, 4.0]) == 2.0  # per round: 2, 3, 1
+
+
 @pytest.mark.slow  # torch.compile and the ONNX export of every configuration: ~1 min
 def test_inference_table_times_every_backend_with_ratios(capsys):
     bench.main(["inference", "--size", "16", "32", "--repeats", "2", "--configs", "none", "SWT-db4", "--threads", "1"])

@@ -39,6 +39,32 @@ def _synchronize() -> None:
         torch.cuda.synchronize()
 
 
+def interleaved_ms(runners: dict, repeats: int, warmup: int = 1) -> dict:
+    """Wall-clock milliseconds of every zero-argument runner over ``repeats`` rounds, each round running every
+    runner once (A B C A B C ...), so that a slow spell of a shared machine hits them alike rather than one of them.
+    Each round starts one runner later: none always runs right after the same one (whose freed memory and caches
+    it would inherit)."""
+    order = list(runners)
+    times: dict = {key: [] for key in order}
+    for _ in range(warmup):
+        for run in runners.values():
+            run()
+    for round_ in range(repeats):
+        shift = round_ % len(order)
+        for key in order[shift:] + order[:shift]:
+            _synchronize()
+            start = time.perf_counter()
+            runners[key]()
+            _synchronize()
+            times[key].append((time.perf_counter() - start) * 1e3)
+    return times
+
+
+def paired_ratio(times: Sequence[float], reference: Sequence[float]) -> float:
+    """The median over rounds of ``times / reference`` in the same round."""
+    return statistics.median(t / r for t, r in zip(times, reference, strict=True))
+
+
 # --------------------------------------------------------------------------------------------------------
 # wavelets
 # --------------------------------------------------------------------------------------------------------
@@ -128,37 +154,46 @@ def bench_data(size: tuple[int, int], frames: int, repeats: int, scale: float) -
 
 
 def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, widths: str = "paper") -> Table:
-    """Whole-forward time and FLOPs of every transform x basis x head, with ratios to ``none`` (one run)."""
+    """Whole-forward time and FLOPs of every transform x basis x head, with ratios to ``none`` (one run, every
+    network timed in the same interleaved rounds: :func:`interleaved_ms`)."""
+    import inspect
+
     from wdss.model.network import HEADS, WIDTHS, WDSSNet
-    from wdss.model.profile import dummy_inputs, flops, forward_ms
+    from wdss.model.profile import dummy_inputs, flops
 
     height, width = size
     kwargs = {} if widths == "paper" else WIDTHS["small"]
     variants = [("none", "-", "shared_inr")] + [(t, b, h) for t in ("dwt", "swt") for b in BASES for h in HEADS]
     table = Table(
-        title=f"inference at {width}x{height} output, {scale}x, {widths} widths, {device}, median of {repeats}"
+        title=f"inference at {width}x{height} output, {scale}x, {widths} widths, {device}, {repeats} interleaved rounds"
     )
     for column in ("transform", "basis", "head", "params", "GFLOPs", "synthesis", "ms", "time / none", "FLOPs / none"):
         table.add_column(column, justify="left" if column in ("transform", "basis", "head") else "right")
-    reference: tuple[float, float] | None = None
     others = comparison_models(widths)
     rows = [(t, b, h, None) for t, b, h in variants] + [(name, "-", "-", net) for name, net in others.items()]
+    shared: dict[tuple, dict] = {}  # inputs by signature and scale: the networks share them
+    runners, counts = {}, {}
     for transform, basis, head, other in rows:
         if other is None:
             net = WDSSNet(transform, basis if basis != "-" else "haar", head, **kwargs).to(device).eval()
         else:
             net = other.to(device).eval()
         row_scale = float(net.scale) if getattr(net, "fixed_scale", False) else scale
-        inputs = dummy_inputs(net, height, width, row_scale, device)
-        total, top = flops(net, inputs)
-        ms = forward_ms(net, inputs, repeats=repeats)
-        if reference is None:
-            reference = (ms, total)
+        key = (tuple(inspect.signature(net.forward).parameters), row_scale)
+        inputs = shared.setdefault(key, dummy_inputs(net, height, width, row_scale, device))
         params = sum(p.numel() for p in net.parameters())
+        counts[transform, basis, head] = (params, *flops(net, inputs))
+        runners[transform, basis, head] = lambda n=net, i=inputs: n(**i)
+    with torch.inference_mode():
+        times = interleaved_ms(runners, repeats, warmup=2)
+    reference = next(iter(runners))
+    for (transform, basis, head), (params, total, top) in counts.items():
+        ms = times[transform, basis, head]
         synthesis = top.get("wavelet", 0) / total
         table.add_row(
             transform, basis, head, f"{params / 1e6:.3f} M", f"{total / 1e9:.1f}", f"{synthesis:.2%}",
-            f"{ms:.0f}", f"{ms / reference[0]:.3f}", f"{total / reference[1]:.3f}",
+            f"{statistics.median(ms):.0f}", f"{paired_ratio(ms, times[reference]):.3f}",
+            f"{total / counts[reference][1]:.3f}",
         )  # fmt: skip
     return table
 
@@ -223,6 +258,8 @@ def _inference_runners(
         if backend == "onnxruntime":
             options = onnxruntime.SessionOptions()
             options.intra_op_num_threads = torch.get_num_threads()  # torch's threads: the same cores for all
+            # Idle workers sleep instead of spinning, which would steal a core from the backend timed next.
+            options.add_session_config_entry("session.intra_op.allow_spinning", "0")
             session = onnxruntime.InferenceSession(f"{tmp}/model.onnx", options, providers=["CPUExecutionProvider"])
             feed = {k: v.numpy() for k, v in inputs.items()}
             runners[backend] = lambda s=session, f=feed: torch.from_numpy(s.run(["color"], f)[0])
@@ -245,9 +282,9 @@ def bench_inference(
     """Milliseconds per output frame of every configuration on every backend (CPU, paper widths), as an engine
     runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode.
 
-    All (configuration, backend) pairs are built first and then timed in rounds, each round running every pair
-    once in the same order (A B C A B C ...), so that a slow spell of a shared machine hits every pair alike.
-    Ratios are medians of the per-round ratios (paired), times medians of the rounds.
+    All (configuration, backend) pairs are built first, then timed in the same interleaved rounds
+    (:func:`interleaved_ms`); ratios are medians of the per-round ratios (paired), times medians of the rounds.
+    ONNX Runtime gets torch's thread count.
     """
     import tempfile
 
@@ -260,27 +297,16 @@ def bench_inference(
             net = WDSSNet(**INFERENCE_CONFIGS[name]).eval()
             built[name] = _inference_runners(net, height, width, scale, backends, f"{tmp}/{name}")
     runners = {(name, backend): built[name][0][backend] for name in configs for backend in backends}
-    times: dict[tuple[str, str], list[float]] = {pair: [] for pair in runners}
     with torch.inference_mode():
-        for _ in range(warmup):
-            for run in runners.values():
-                run()
-        for _ in range(repeats):
-            for pair, run in runners.items():
-                start = time.perf_counter()
-                run()
-                times[pair].append((time.perf_counter() - start) * 1e3)
-
-    def paired(a: tuple[str, str], b: tuple[str, str]) -> float:
-        return statistics.median(x / y for x, y in zip(times[a], times[b], strict=True))
+        times = interleaved_ms(runners, repeats, warmup)
 
     threads = torch.get_num_threads()
     table = Table(title=f"ms per {width}x{height} frame at {scale:g}x, CPU, {threads} threads, {repeats} rounds")
     for column in ("model", "backend", "ms / frame", "time / eager", "time / none", "max rel. error"):
         table.add_column(column, justify="left" if column in ("model", "backend") else "right")
     for name, backend in runners:
-        eager = f"{paired((name, backend), (name, 'eager')):.3f}" if "eager" in backends else "-"
-        none = f"{paired((name, backend), ('none', backend)):.3f}" if "none" in configs else "-"
+        eager = f"{paired_ratio(times[name, backend], times[name, 'eager']):.3f}" if "eager" in backends else "-"
+        none = f"{paired_ratio(times[name, backend], times['none', backend]):.3f}" if "none" in configs else "-"
         table.add_row(
             name, backend, f"{statistics.median(times[name, backend]):.1f}", eager, none,
             f"{built[name][1][backend]:.1e}",
