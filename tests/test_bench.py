@@ -55,3 +55,19 @@ def test_inference_table_times_every_backend_with_ratios(capsys):
             assert float(to_eager) == 1.0 if backend == "eager" else float(to_eager) > 0
             assert float(error) <= 1e-4  # every backend computes the eager colour
         assert float(rows["none", backend][2]) == 1.0
+
+
+def test_learn_trains_the_model_and_a_plain_cnn_on_the_same_batches_from_the_same_start():
+    table = bench.bench_learn(["experiment=smoke", "recipe.residual=bilinear"], steps=2, every=1, held=1, epochs=3)
+    cells = {column.header: [float(c.rstrip("%")) for c in column._cells] for column in table.columns}
+    assert cells["step"] == [0, 1, 2]
+    # With a bilinear residual and a zero exit both start as the bilinear upsampling: the same held-out L1.
+    assert cells["model: L1"][0] == pytest.approx(cells["plain CNN: L1"][0], abs=1e-4)
+    assert cells["model: L1 change"][0] == 0.0
+    # Both were trained: the plain CNN's zero last layer moved, so its held-out loss did too.
+    assert cells["plain CNN: loss"][2] != cells["plain CNN: loss"][0]
+
+
+def test_learn_refuses_a_model_without_weights():
+    with pytest.raises(SystemExit, match="trainable single-frame model"):
+        bench.bench_learn(["experiment=smoke", "variant=bilinear_demodulated"], steps=1, every=1, held=1, epochs=2)

@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m wdss.bench wavelets|data|model|inference|stability|render``.
+"""Benchmarks: ``python -m wdss.bench wavelets|data|model|inference|stability|render|learn``.
 
 Every benchmark reports medians of repeated runs and ratios measured in the same process, never absolute
 targets: timing on shared machines is noisy, so comparisons are only made within one run.
@@ -374,6 +374,110 @@ def bench_render(
     return table
 
 
+class PlainReference(torch.nn.Module):
+    """What a plain CNN learns from the same inputs: four 3x3 convolutions at full resolution on log1p of the
+    bilinearly upsampled LR irradiance, the G-buffers, the spatial mask (and log1p history when the batch has
+    it), predicting a log1p-space correction of that upsampling; the last layer starts at zero."""
+
+    def __init__(self, channels: int, width: int = 32) -> None:
+        super().__init__()
+        convs = [channels, width, width, width, 3]
+        layers: list[torch.nn.Module] = []
+        for a, b in zip(convs, convs[1:], strict=False):
+            layers += [torch.nn.Conv2d(a, b, 3, padding=1), torch.nn.ReLU()]
+        self.body = torch.nn.Sequential(*layers[:-1])
+        torch.nn.init.zeros_(self.body[-1].weight)
+        torch.nn.init.zeros_(self.body[-1].bias)
+
+    @staticmethod
+    def inputs(batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
+        size = batch["gbuffer"].shape[-2:]
+        base = torch.log1p(torch.nn.functional.interpolate(batch["lr"], size=size, mode="bilinear").clamp_min(0))
+        parts = [base, batch["gbuffer"], batch["spatial_mask"]]
+        if "history" in batch:
+            parts.append(torch.log1p(batch["history"].clamp_min(0)))
+        return base, torch.cat(parts, 1)
+
+    def forward(self, batch: dict) -> dict:
+        base, x = self.inputs(batch)
+        irradiance = torch.expm1((base + self.body(x)).clamp(0.0, 20.0))
+        return {"irradiance": irradiance, "color": irradiance * batch["brdf"], "coefficients": None}
+
+
+def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epochs: int) -> Table:
+    """Does a configuration learn in a few hundred steps? Its training loss on ``held`` batches it never trains
+    on (patches of the training scenes, drawn as training draws them), every ``every`` Adam steps, beside a plain
+    CNN (:class:`PlainReference`) trained on the same batches in the same order with the same loss, learning rate
+    and gradient clipping. Minutes where a training run takes tens of them; the reference says how much of the
+    loss the inputs let a network take in that many steps. Compare the L1 columns (a term both losses have: the
+    model's total also holds its wavelet term)."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.hydra_config import HydraConfig
+
+    from wdss.paths import CONF_DIR
+    from wdss.targets import instantiate
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        scale = [] if any(o.startswith("experiment=") for o in overrides) else ["experiment=cpu"]
+        cfg = compose("train", overrides=[*scale, "data.num_workers=0", *overrides], return_hydra_config=True)
+    HydraConfig.instance().set_config(cfg)
+    torch.manual_seed(int(cfg.seed))
+    module = instantiate(cfg.model, tonemap_exposure=cfg.get("tonemap_exposure"))
+    if not module.trainable or module.temporal == "recurrent":
+        raise SystemExit("bench learn: needs a trainable single-frame model (not a baseline, not temporal=recurrent)")
+    datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
+    datamodule.setup("fit")
+    loader = datamodule.train_dataloader()
+    batches = []
+    for epoch in range(epochs):
+        loader.sampler.set_epoch(epoch)
+        batches += list(loader)
+    if len(batches) <= held:
+        raise SystemExit(f"bench learn: {len(batches)} batches in {epochs} epochs, {held} held out: raise --epochs")
+    held_out, pool = batches[:held], batches[held:]
+    reference = PlainReference(PlainReference.inputs(held_out[0])[1].shape[1])
+    nets = {"model": (module.net, module), "plain CNN": (reference, reference)}
+    lr = float(cfg.model.optimizer.lr)
+    clip = cfg.trainer.get("gradient_clip_val")
+    optimizers = {name: torch.optim.Adam(net.parameters(), lr=lr) for name, (net, _) in nets.items()}
+
+    def held_loss(name: str) -> dict[str, float]:
+        net, forward = nets[name]
+        net.eval()
+        with torch.no_grad():
+            terms = [module._loss(b, forward(b)) for b in held_out]
+        net.train()
+        return {k: sum(float(t[k]) for t in terms) / len(terms) for k in ("total", "l1")}
+
+    table = Table(title=f"learn: held-out training loss ({held} batches), Adam lr {lr:g}, {' '.join(overrides)}")
+    table.add_column("step", justify="right")
+    for name in nets:
+        for column in ("loss", "L1", "L1 change"):
+            table.add_column(f"{name}: {column}", justify="right")
+    first: dict[str, float] = {}
+    start = time.perf_counter()
+    for step in range(steps + 1):
+        if step % every == 0 or step == steps:
+            row = [str(step)]
+            for name in nets:
+                loss = held_loss(name)
+                first.setdefault(name, loss["l1"])
+                row += [f"{loss['total']:.4f}", f"{loss['l1']:.4f}", f"{loss['l1'] / first[name] - 1:+.1%}"]
+            table.add_row(*row)
+            print(f"bench learn: step {step}/{steps} ({time.perf_counter() - start:.0f} s): " + " | ".join(row[1:]))
+        if step == steps:
+            break
+        batch = pool[step % len(pool)]
+        for name, (net, forward) in nets.items():
+            loss = module._loss(batch, forward(batch))["total"]
+            optimizers[name].zero_grad()
+            loss.backward()
+            if clip:
+                torch.nn.utils.clip_grad_norm_(net.parameters(), float(clip))
+            optimizers[name].step()
+    return table
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m wdss.bench", description=__doc__)
     sub = parser.add_subparsers(dest="what", required=True)
@@ -407,6 +511,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     ren.add_argument("--size", type=int, nargs=2, default=(384, 216), metavar=("W", "H"))
     ren.add_argument("--samples", type=int, nargs="+", default=[8, 16, 32])
     ren.add_argument("--reference", type=int, default=512)
+    learn = sub.add_parser("learn", help="held-out training loss of a configuration beside a plain CNN's")
+    learn.add_argument("overrides", nargs="*", help="train config overrides (default experiment=cpu)")
+    learn.add_argument("--steps", type=int, default=300)
+    learn.add_argument("--every", type=int, default=50)
+    learn.add_argument("--held", type=int, default=6, help="batches held out (never trained on)")
+    learn.add_argument("--epochs", type=int, default=4, help="epochs of batches drawn (held + training pool)")
     args = parser.parse_args(argv)
 
     # Off a terminal (a pipe, a log file) rich would wrap every cell at 80 columns: print tables whole.
@@ -421,6 +531,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         console.print(bench_render(args.seeds, args.frame, tuple(args.size), args.samples, args.reference))
     elif args.what == "model":
         console.print(bench_model(tuple(args.size), args.scale, args.repeats, args.device, args.widths))
+    elif args.what == "learn":
+        console.print(bench_learn(args.overrides, args.steps, args.every, args.held, args.epochs))
     elif args.what == "inference":
         if args.threads:
             torch.set_num_threads(args.threads)
