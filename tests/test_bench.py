@@ -57,11 +57,12 @@ def test_inference_table_times_every_backend_with_ratios(capsys):
         assert float(rows["none", backend][2]) == 1.0
 
 
-def test_learn_trains_the_model_and_a_plain_cnn_on_the_same_batches_from_the_same_start():
-    table = bench.bench_learn(["experiment=smoke", "recipe.residual=bilinear"], steps=2, every=1, held=1, epochs=3)
+@pytest.mark.parametrize("residual", ["bilinear", "joint_bilateral"])
+def test_learn_trains_the_model_and_a_plain_cnn_on_the_same_batches_from_the_same_start(residual):
+    table = bench.bench_learn(["experiment=smoke", f"recipe.residual={residual}"], steps=2, every=1, held=1, epochs=3)
     cells = {column.header: [float(c.rstrip("%")) for c in column._cells] for column in table.columns}
     assert cells["step"] == [0, 1, 2]
-    # With a bilinear residual and a zero exit both start as the bilinear upsampling: the same held-out L1.
+    # With a residual and a zero exit both start as the model's upsampling: the same held-out L1.
     assert cells["model: L1"][0] == pytest.approx(cells["plain CNN: L1"][0], abs=1e-4)
     assert cells["model: L1 change"][0] == 0.0
     # Both were trained: the plain CNN's zero last layer moved, so its held-out loss did too.

@@ -375,12 +375,14 @@ def bench_render(
 
 
 class PlainReference(torch.nn.Module):
-    """What a plain CNN learns from the same inputs: four 3x3 convolutions at full resolution on log1p of the
-    bilinearly upsampled LR irradiance, the G-buffers, the spatial mask (and log1p history when the batch has
-    it), predicting a log1p-space correction of that upsampling; the last layer starts at zero."""
+    """What a plain CNN learns from the same inputs and the same start: four 3x3 convolutions at full resolution
+    on log1p of the upsampled LR irradiance (``upsample``: the model's residual upsampler, else bilinear), the
+    G-buffers, the spatial mask (and log1p history when the batch has it), predicting a log1p-space correction
+    of that upsampling; the last layer starts at zero."""
 
-    def __init__(self, channels: int, width: int = 32) -> None:
+    def __init__(self, channels: int, upsample: Callable | None = None, width: int = 32) -> None:
         super().__init__()
+        self.upsample = upsample
         convs = [channels, width, width, width, 3]
         layers: list[torch.nn.Module] = []
         for a, b in zip(convs, convs[1:], strict=False):
@@ -389,10 +391,13 @@ class PlainReference(torch.nn.Module):
         torch.nn.init.zeros_(self.body[-1].weight)
         torch.nn.init.zeros_(self.body[-1].bias)
 
-    @staticmethod
-    def inputs(batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
+    def inputs(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
         size = batch["gbuffer"].shape[-2:]
-        base = torch.log1p(torch.nn.functional.interpolate(batch["lr"], size=size, mode="bilinear").clamp_min(0))
+        if self.upsample is None:
+            upsampled = torch.nn.functional.interpolate(batch["lr"], size=size, mode="bilinear")
+        else:
+            upsampled = self.upsample(batch["lr"], batch["gbuffer"])
+        base = torch.log1p(upsampled.clamp_min(0))
         parts = [base, batch["gbuffer"], batch["spatial_mask"]]
         if "history" in batch:
             parts.append(torch.log1p(batch["history"].clamp_min(0)))
@@ -435,7 +440,10 @@ def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epo
     if len(batches) <= held:
         raise SystemExit(f"bench learn: {len(batches)} batches in {epochs} epochs, {held} held out: raise --epochs")
     held_out, pool = batches[:held], batches[held:]
-    reference = PlainReference(PlainReference.inputs(held_out[0])[1].shape[1])
+    # The same start as the model's: its residual upsampler (bilinear or joint bilateral), else bilinear.
+    upsample = module.net._upsample if getattr(module.net, "residual", "none") != "none" else None
+    channels = PlainReference(1, upsample).inputs(held_out[0])[1].shape[1]
+    reference = PlainReference(channels, upsample)
     nets = {"model": (module.net, module), "plain CNN": (reference, reference)}
     lr = float(cfg.model.optimizer.lr)
     clip = cfg.trainer.get("gradient_clip_val")
