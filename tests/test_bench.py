@@ -72,3 +72,9 @@ def test_learn_trains_the_model_and_a_plain_cnn_on_the_same_batches_from_the_sam
 def test_learn_refuses_a_model_without_weights():
     with pytest.raises(SystemExit, match="trainable single-frame model"):
         bench.bench_learn(["experiment=smoke", "variant=bilinear_demodulated"], steps=1, every=1, held=1, epochs=2)
+
+
+def test_learn_reads_the_reference_buffers_for_a_model_that_does_not():
+    # NSRR reads LR G-buffers only: the HR G-buffers the plain CNN needs are read for it.
+    table = bench.bench_learn(["experiment=smoke", "variant=nsrr"], steps=1, every=1, held=1, epochs=3)
+    assert [float(c) for c in table.columns[0]._cells] == [0, 1]

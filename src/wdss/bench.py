@@ -430,7 +430,9 @@ def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epo
     module = instantiate(cfg.model, tonemap_exposure=cfg.get("tonemap_exposure"))
     if not module.trainable or module.temporal == "recurrent":
         raise SystemExit("bench learn: needs a trainable single-frame model (not a baseline, not temporal=recurrent)")
-    datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
+    # The reference's inputs too: a model may read other buffers (NSRR reads LR G-buffers, not HR ones).
+    inputs = sorted(set(module.inputs) | {"lr", "gbuffer", "spatial_mask"})
+    datamodule = instantiate(cfg.data, inputs=inputs, test_inputs=list(module.test_inputs))
     datamodule.setup("fit")
     loader = datamodule.train_dataloader()
     batches = []
