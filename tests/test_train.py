@@ -497,10 +497,13 @@ def test_evaluating_real_esrgan_without_weights_or_training_is_refused(tmp_path,
 def test_the_methods_sweep_runs_every_method_at_smoke_scale(tmp_path):
     done = run_sweep(tmp_path, "methods", "seed=0", timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
-    _, runs = sweep_client(tmp_path, "methods")
+    client, runs = sweep_client(tmp_path, "methods")
     jobs = {r.data.tags.get("variant"): r for r in runs if "mlflow.parentRunId" in r.data.tags}
     methods = {"bicubic", "bilinear_demodulated", "joint_bilateral", "real_esrgan", "nsrr", "fusesr", "dfasr"}
     assert set(jobs) == methods | {"none", "swt_db4"}
     assert all(r.info.status == "FINISHED" and "test/psnr_3x" in r.data.metrics for r in jobs.values())
     assert jobs["real_esrgan"].data.tags["weights"] == "trained-on-wdss-frames"
     assert jobs["dfasr"].data.tags["temporal"] == "recurrent"
+    for variant, run in jobs.items():  # where flicker shows: a video of every method and baseline
+        videos = {a.path for a in client.list_artifacts(run.info.run_id, "videos")}
+        assert videos == {"videos/fixture_000_3x.mp4", "videos/fixture_000_3x_crop.gif"}, variant
