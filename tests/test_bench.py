@@ -78,3 +78,11 @@ def test_learn_reads_the_reference_buffers_for_a_model_that_does_not():
     # NSRR reads LR G-buffers only: the HR G-buffers the plain CNN needs are read for it.
     table = bench.bench_learn(["experiment=smoke", "variant=nsrr"], steps=1, every=1, held=1, epochs=3)
     assert [float(c) for c in table.columns[0]._cells] == [0, 1]
+
+
+def test_learn_measures_tone_mapped_l1_whatever_the_loss_terms():
+    # Squared error only: the loss has no L1 term, the L1 columns still compare both from the same start.
+    overrides = ["experiment=smoke", "recipe.residual=bilinear", "loss.weights.l1=0", "loss.weights.l2=1"]
+    table = bench.bench_learn(overrides, steps=1, every=1, held=1, epochs=3)
+    cells = {column.header: column._cells for column in table.columns}
+    assert cells["model: L1"][0] == cells["plain CNN: L1"][0] and float(cells["model: L1"][0]) > 0

@@ -414,8 +414,8 @@ def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epo
     on (patches of the training scenes, drawn as training draws them), every ``every`` Adam steps, beside a plain
     CNN (:class:`PlainReference`) trained on the same batches in the same order with the same loss, learning rate
     and gradient clipping. Minutes where a training run takes tens of them; the reference says how much of the
-    loss the inputs let a network take in that many steps. Compare the L1 columns (a term both losses have: the
-    model's total also holds its wavelet term)."""
+    loss the inputs let a network take in that many steps. Compare the L1 columns (tone-mapped, as the metrics
+    see it, whatever the loss: the model's total also holds its wavelet term)."""
     from hydra import compose, initialize_config_dir
     from hydra.core.hydra_config import HydraConfig
 
@@ -451,18 +451,26 @@ def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epo
     clip = cfg.trainer.get("gradient_clip_val")
     optimizers = {name: torch.optim.Adam(net.parameters(), lr=lr) for name, (net, _) in nets.items()}
 
+    def tone_l1(batch: dict, out: dict) -> float:
+        """L1 on the metric's display values, whatever the loss's terms and space."""
+        target = module.tone(batch["target"], batch["target"])
+        shown = out["display"] if out.get("display") is not None else module.tone(out["color"], batch["target"])
+        return float((shown - target).abs().mean())
+
     def held_loss(name: str) -> dict[str, float]:
         net, forward = nets[name]
         net.eval()
         with torch.no_grad():
-            terms = [module._loss(b, forward(b)) for b in held_out]
+            outs = [(b, forward(b)) for b in held_out]
+            total = sum(float(module._loss(b, out)["total"]) for b, out in outs) / len(outs)
+            l1 = sum(tone_l1(b, out) for b, out in outs) / len(outs)
         net.train()
-        return {k: sum(float(t[k]) for t in terms) / len(terms) for k in ("total", "l1")}
+        return {"total": total, "l1": l1}
 
     table = Table(title=f"learn: held-out training loss ({held} batches), Adam lr {lr:g}, {' '.join(overrides)}")
     table.add_column("step", justify="right")
     for name in nets:
-        for column in ("loss", "L1", "L1 change"):
+        for column in ("loss", "L1", "L1 change"):  # L1: tone-mapped
             table.add_column(f"{name}: {column}", justify="right")
     first: dict[str, float] = {}
     start = time.perf_counter()
