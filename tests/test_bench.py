@@ -66,7 +66,7 @@ def test_learn_trains_the_model_and_a_plain_cnn_on_the_same_batches_from_the_sam
     assert cells["model: L1"][0] == pytest.approx(cells["plain CNN: L1"][0], abs=1e-4)
     assert cells["model: L1 change"][0] == 0.0
     # Both were trained: the plain CNN's zero last layer moved, so its held-out loss did too.
-    assert cells["plain CNN: loss"][2] != cells["plain CNN: loss"][0]
+    assert any(value != cells["plain CNN: loss"][0] for value in cells["plain CNN: loss"][1:])
 
 
 def test_learn_refuses_a_model_without_weights():

@@ -378,12 +378,12 @@ class PlainReference(torch.nn.Module):
     """What a plain CNN learns from the same inputs and the same start: four 3x3 convolutions at full resolution
     on log1p of the upsampled LR irradiance (``upsample``: the model's residual upsampler, else bilinear), the
     G-buffers, the spatial mask (and log1p history when the batch has it), predicting a log1p-space correction
-    of that upsampling; the last layer starts at zero."""
+    of that upsampling; the last layer starts at zero. Sized from an example ``batch``."""
 
-    def __init__(self, channels: int, upsample: Callable | None = None, width: int = 32) -> None:
+    def __init__(self, batch: dict, upsample: Callable | None = None, width: int = 32) -> None:
         super().__init__()
         self.upsample = upsample
-        convs = [channels, width, width, width, 3]
+        convs = [self.inputs(batch)[1].shape[1], width, width, width, 3]
         layers: list[torch.nn.Module] = []
         for a, b in zip(convs, convs[1:], strict=False):
             layers += [torch.nn.Conv2d(a, b, 3, padding=1), torch.nn.ReLU()]
@@ -444,8 +444,7 @@ def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epo
     held_out, pool = batches[:held], batches[held:]
     # The same start as the model's: its residual upsampler (bilinear or joint bilateral), else bilinear.
     upsample = module.net._upsample if getattr(module.net, "residual", "none") != "none" else None
-    channels = PlainReference(1, upsample).inputs(held_out[0])[1].shape[1]
-    reference = PlainReference(channels, upsample)
+    reference = PlainReference(held_out[0], upsample)
     nets = {"model": (module.net, module), "plain CNN": (reference, reference)}
     lr = float(cfg.model.optimizer.lr)
     clip = cfg.trainer.get("gradient_clip_val")
