@@ -22,16 +22,7 @@ TABLE_WIDTH = 160  # columns of a table printed off a terminal
 
 def median_ms(fn: Callable[[], object], *, repeats: int, warmup: int = 1) -> float:
     """Median wall-clock milliseconds of ``fn()`` over ``repeats`` runs after ``warmup`` runs."""
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        _synchronize()
-        start = time.perf_counter()
-        fn()
-        _synchronize()
-        times.append((time.perf_counter() - start) * 1e3)
-    return statistics.median(times)
+    return statistics.median(interleaved_ms({"fn": fn}, repeats, warmup)["fn"])
 
 
 def _synchronize() -> None:
@@ -423,8 +414,8 @@ def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epo
     from wdss.targets import instantiate
 
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        scale = [] if any(o.startswith("experiment=") for o in overrides) else ["experiment=cpu"]
-        cfg = compose("train", overrides=[*scale, "data.num_workers=0", *overrides], return_hydra_config=True)
+        preset = [] if any(o.startswith("experiment=") for o in overrides) else ["experiment=cpu"]
+        cfg = compose("train", overrides=[*preset, "data.num_workers=0", *overrides], return_hydra_config=True)
     HydraConfig.instance().set_config(cfg)
     torch.manual_seed(int(cfg.seed))
     module = instantiate(cfg.model, tonemap_exposure=cfg.get("tonemap_exposure"))
