@@ -2,11 +2,12 @@
 
 :class:`FrameDataset` reads, per sample, only the buffers that the requested batch keys need (from the
 current and previous high-resolution frame and, where one matches the scale, a native low-resolution
-folder), cleans them (non-finite check, far-depth clamp, depth normalisation, unit normals), crops a patch
-and mirrors it. :class:`Collate` then works on the whole batch, in the loader's worker: it picks the
-batch's scale, point-samples the low-resolution frame where no native one was read, computes BRDF factors,
-demodulates, warps the history and computes the masks. The batch keys are documented in
-:mod:`wdss.data.datamodule`.
+folder), and only the patch: a packed store (:mod:`wdss.data.packed`) reads the patch's tiles, an EXR file is
+decoded whole and cut. Previous frames are cut with the margin their warp needs (the motion vectors' extent in
+the patch). It mirrors the patch and records each frame's depth range. :class:`Collate` stacks the samples into
+a :class:`~wdss.data.preprocess.RawBatch` and, unless the preprocessing runs on the device, builds the batch
+in the loader's worker (:mod:`wdss.data.preprocess`: scale, point sampling, BRDF, demodulation, warps, masks).
+The batch keys are documented in :mod:`wdss.data.datamodule`.
 """
 
 from __future__ import annotations
@@ -14,24 +15,31 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 from collections.abc import Sequence as Seq
-from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 from torch.utils.data import Dataset, Sampler
 
-from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf, split_sum_brdf
 from wdss.data.layouts import BUFFERS, SceneError, Sequence
-from wdss.data.sampling import flip, lr_size, point_sample, scale_matches
-from wdss.data.warp import normalize_normals, spatial_mask, temporal_mask, warp_backward
+from wdss.data.preprocess import GBUFFER_STACK, Preprocessing, RawBatch, brdf_of, build_batch
+from wdss.data.sampling import flip, lr_size, scale_matches
 
-__all__ = ["BATCH_KEYS", "GBUFFER_STACK", "Collate", "EpochSampler", "FrameDataset", "Preprocessing", "requirements"]
+__all__ = [
+    "BATCH_KEYS",
+    "GBUFFER_STACK",
+    "Collate",
+    "EpochSampler",
+    "FrameDataset",
+    "Preprocessing",
+    "brdf_of",
+    "build_batch",
+    "requirements",
+]
 
 log = logging.getLogger(__name__)
 
-# The high-resolution G-buffer stack of the network, in channel order (11 channels).
-GBUFFER_STACK = ("base_color", "depth", "normal", "specular", "roughness", "nov", "metallic")
 BATCH_KEYS = (
     "target",
     "brdf",
@@ -49,30 +57,10 @@ BATCH_KEYS = (
     "history2",
 )
 _MASK_BUFFERS = {"depth", "normal", "base_color"}
+_WARPED = {"history", "temporal_mask", "history2"}  # keys that warp previous frames by the motion vectors
 ROLES = ("hr", "lr", "prev", "prev_lr", "prev2")
 _OFFSET = {"hr": 0, "lr": 0, "prev": 1, "prev_lr": 1, "prev2": 2}  # frames back from the sample's frame
-
-
-@dataclass
-class Preprocessing:
-    """How buffers become batch tensors (the ``data.preprocessing`` config)."""
-
-    brdf: str = "extranet"  # extranet | split_sum
-    demodulate: bool = True  # lr and history are irradiance (colour / F) rather than colour
-    depth_far: float | None = 100.0  # depth beyond this is background: set to 0 (the authors' loader)
-    depth_normalize: bool = True  # per-frame min-max normalisation of depth (DFASR); LR by its HR frame's range
-    color_max: float | None = None  # clip HDR colour to [0, color_max] at load (the authors used 10)
-    sanitize: bool = False  # replace non-finite values by 0 and count them, instead of failing
-    spatial_thresholds: dict = field(default_factory=lambda: {"depth": 0.01, "normal": 0.9, "albedo": 0.1})
-
-    def __post_init__(self) -> None:
-        if self.brdf not in ("extranet", "split_sum"):
-            raise ValueError(f"data.preprocessing.brdf must be 'extranet' or 'split_sum', got {self.brdf!r}")
-
-    @property
-    def brdf_buffers(self) -> set[str]:
-        extra = {"roughness", "nov"} if self.brdf == "split_sum" else set()
-        return {"base_color", "metallic", "specular"} | extra
+_HR_OF = {"lr": "hr", "prev_lr": "prev"}  # a low-resolution role and the high-resolution frame it samples
 
 
 def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]]:
@@ -120,36 +108,6 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
     return need
 
 
-def _far(depth: Tensor, prep: Preprocessing) -> Tensor:
-    return depth if prep.depth_far is None else torch.where(depth > prep.depth_far, torch.zeros_like(depth), depth)
-
-
-def _depth_range(depth: np.ndarray, prep: Preprocessing) -> tuple[Tensor, Tensor]:
-    """The min-max normalisation range of one frame's depth (after the far clamp)."""
-    t = _far(torch.from_numpy(depth), prep)
-    return t.min(), t.max()
-
-
-def _clean(
-    buffers: dict[str, np.ndarray], prep: Preprocessing, depth_range: tuple[Tensor, Tensor] | None = None
-) -> dict[str, Tensor]:
-    """Tensors of one frame's buffers; depth is normalised by ``depth_range`` (default: its own min and max)."""
-    out = {}
-    for name, value in buffers.items():
-        t = torch.from_numpy(value)
-        if name == "depth":
-            t = _far(t, prep)
-            if prep.depth_normalize:
-                lo, hi = depth_range if depth_range is not None else (t.min(), t.max())
-                t = (t - lo) / (1e-6 + torch.clamp(hi, min=1.0) - lo)
-        elif name == "normal":
-            t = normalize_normals(t[None])[0]
-        elif name == "color" and prep.color_max is not None:
-            t = t.clamp(0.0, prep.color_max)
-        out[name] = t
-    return out
-
-
 class FrameDataset(Dataset):
     """Samples of one split: every frame of every sequence (that has history, where history is needed).
 
@@ -189,6 +147,7 @@ class FrameDataset(Dataset):
         self.sequence_length = sequence_length
         self.seed = seed
         self.need = requirements(self.keys, self.prep)
+        self.warps = bool(_WARPED & set(self.keys))
         back = max((_OFFSET[role] for role, buffers in self.need.items() if buffers), default=0)
         self.items: list[tuple[int, int]] = []
         for index, seq in enumerate(self.sequences):
@@ -223,58 +182,71 @@ class FrameDataset(Dataset):
                 return height
         return None
 
-    def _frame(self, seq: Sequence, frame: int, lr_height: int | None) -> dict:
-        """The uncropped buffers of one frame in each role (zeros for history before the first frame)."""
-        need = self.need
-        # Native LR depth is normalised with the range of its HR frame, as point-sampled LR depth (cut from the
-        # cleaned HR frame) is: the spatial mask compares HR depth with LR depth, and both paths must agree. So
-        # the HR depth is read (and dropped after) where only the LR depth is needed.
-        hr_of = {"lr": "hr", "prev_lr": "prev"}
-        ranged = bool(lr_height) and self.prep.depth_normalize
-        extra = {hr: {"depth"} - need[hr] for lr, hr in hr_of.items() if ranged and "depth" in need[lr]}
-        # Without a native low-resolution folder, LR roles are point-sampled from their HR frame in Collate.
+    def _frame(self, seq: Sequence, frame: int, lr_height: int | None, window: tuple | None) -> dict:
+        """The raw buffers of one frame in each role, cut to the window (zeros for history before the first frame),
+        each high-resolution frame's depth range, and the margins of the previous frames' windows."""
+        need, prep = self.need, self.prep
+        hr_box, lr_box = window if window is not None else (None, None)
+        # Without a native low-resolution folder, LR roles are point-sampled from their HR frame.
         reads = {
-            "hr": (frame, seq.hr, need["hr"] | (set() if lr_height else need["lr"]) | extra.get("hr", set())),
+            "hr": (frame, seq.hr, need["hr"] | (set() if lr_height else need["lr"])),
             "lr": (frame, lr_height, need["lr"] if lr_height else set()),
-            "prev": (
-                frame - 1,
-                seq.hr,
-                need["prev"] | (set() if lr_height else need["prev_lr"]) | extra.get("prev", set()),
-            ),
+            "prev": (frame - 1, seq.hr, need["prev"] | (set() if lr_height else need["prev_lr"])),
             "prev_lr": (frame - 1, lr_height, need["prev_lr"] if lr_height else set()),
             "prev2": (frame - 2, seq.hr, need["prev2"]),
         }
+        # Native LR depth is normalised with the range of its HR frame, as point-sampled LR depth (cut from the
+        # HR frame) is: the spatial mask compares HR depth with LR depth, and both paths must agree.
+        ranged = {
+            role: prep.depth_normalize
+            and ("depth" in buffers or any(_HR_OF[low] == role and "depth" in reads[low][2] for low in _HR_OF))
+            for role, (_, _, buffers) in reads.items()
+        }
         available = set(seq.frames)
-        out: dict = {"sequence": seq.name, "frame": frame}
-        shapes: dict[int | None, tuple[int, int]] = {}
-        ranges: dict[str, tuple[Tensor, Tensor]] = {}  # HR role -> its depth range, for the native LR role
-        for role, (number, height, buffers) in reads.items():
-            if not buffers:
+        out: dict = {"sequence": seq.name, "frame": frame, "ranges": {}, "margins": {"prev": 0, "prev2": 0}}
+        margin = 0
+        for role in ROLES:
+            number, height, buffers = reads[role]
+            box = lr_box if role in _HR_OF else hr_box
+            if role in ("prev", "prev2") and box is not None and self.warps:
+                # The previous frame's window: the patch grown by the extent of the motion that points into it.
+                motion = out["hr" if role == "prev" else "prev"].get("motion")
+                margin += _margin(motion, seq.shape(seq.hr)) if motion is not None else 0
+                y, x, h, w = box
+                box = (y - margin, x - margin, h + 2 * margin, w + 2 * margin)
+                out["margins"][role] = margin
+            if role in _HR_OF and "depth" in buffers and prep.depth_normalize:
+                out["ranges"][role] = out["ranges"][_HR_OF[role]]
+            want_range = ranged[role] and role not in _HR_OF
+            if not buffers and not want_range:
                 out[role] = {}
-            elif number in available:
-                raw = seq.read(number, height, sorted(buffers), sanitize=self.prep.sanitize)
-                if ranged and role in hr_of.values() and "depth" in raw:
-                    ranges[role] = _depth_range(raw["depth"], self.prep)
-                clean = _clean(raw, self.prep, ranges.get(hr_of[role]) if role in hr_of else None)
-                out[role] = {k: v for k, v in clean.items() if k not in extra.get(role, ())}
-                shapes.setdefault(height, next(iter(raw.values())).shape[-2:])
-            else:  # history before the first frame, kept with zeros (first_frame="zeros")
-                shape = shapes.get(height) or self._shape(seq, height)
-                out[role] = {b: torch.zeros(BUFFERS[b], *shape) for b in buffers - extra.get(role, set())}
-        if lr_height and seq.hr in shapes and lr_height in shapes:
-            hr_shape, lr_shape = shapes[seq.hr], shapes[lr_height]
-            expected = lr_size(*hr_shape, float(self.scale))
-            if tuple(lr_shape) != expected:
-                raise SceneError(
-                    f"sequence {seq.name!r}, frame {frame}: the {lr_height}P frame is {lr_shape[1]}x{lr_shape[0]}, "
-                    f"but {hr_shape[1]}x{hr_shape[0]} at scale {self.scale} needs {expected[1]}x{expected[0]}"
+                continue
+            if number in available:
+                raw, found = seq.read_window(
+                    number,
+                    height,
+                    sorted(buffers),
+                    box,
+                    sanitize=prep.sanitize,
+                    depth_far=prep.depth_far,
+                    depth_range=want_range,
                 )
+            else:  # history before the first frame, kept with zeros (first_frame="zeros"): they stay zero when cleaned
+                h, w = box[2:] if box is not None else seq.shape(height)
+                raw, found = {b: np.zeros((BUFFERS[b], h, w), np.float32) for b in buffers}, (0.0, 1.0)
+            out[role] = {k: torch.from_numpy(np.asarray(v, dtype=np.float32)) for k, v in raw.items()}
+            if want_range:
+                out["ranges"][role] = found
         return out
 
-    def _shape(self, seq: Sequence, height: int) -> tuple[int, int]:
-        """The frame size at ``height`` (from one plane of the first frame), for zero history."""
-        plane = seq.read(seq.frames[0], height, ["color"] if seq.has("color", height) else ["depth"])
-        return next(iter(plane.values())).shape[-2:]
+    def _check_native_lr(self, seq: Sequence, frame: int, lr_height: int) -> None:
+        hr_shape, lr_shape = seq.shape(seq.hr), seq.shape(lr_height)
+        expected = lr_size(*hr_shape, float(self.scale))
+        if tuple(lr_shape) != expected:
+            raise SceneError(
+                f"sequence {seq.name!r}, frame {frame}: the {lr_height}P frame is {lr_shape[1]}x{lr_shape[0]}, "
+                f"but {hr_shape[1]}x{hr_shape[0]} at scale {self.scale} needs {expected[1]}x{expected[0]}"
+            )
 
     def __getitem__(self, index: int | tuple[int, int]) -> dict:
         # (index, epoch) from EpochSampler: all randomness is a function of (seed, epoch, index), so a run that
@@ -284,14 +256,15 @@ class FrameDataset(Dataset):
         seq_index, frame = self.items[index]
         seq = self.sequences[seq_index]
         lr_height = self.native_lr(seq)
-        steps = [self._frame(seq, f, lr_height) for f in range(frame - self.sequence_length + 1, frame + 1)]
-        window = self._window(steps[0], lr_height and seq.hr / lr_height, rng)
+        if lr_height:
+            self._check_native_lr(seq, frame, lr_height)
+        window = self._window(seq, lr_height and seq.hr / lr_height, rng)
+        steps = [self._frame(seq, f, lr_height, window) for f in range(frame - self.sequence_length + 1, frame + 1)]
         flips = (False, False)
         if self.flips:
             flips = (bool(torch.rand((), generator=rng) < 0.5), bool(torch.rand((), generator=rng) < 0.5))
         for step in steps:
-            self._crop(step, window)
-            if any(flips):
+            if any(flips):  # margins are symmetric: a mirrored window with its margin is the mirrored margin's window
                 for role in ROLES:
                     camera = seq.camera(step["frame"] - _OFFSET[role])
                     camera = seq.camera(step["frame"]) if camera is None else camera
@@ -299,12 +272,11 @@ class FrameDataset(Dataset):
             step["seed"] = _mix(self.seed, epoch, index) if epoch is not None else None
         return steps[0] if self.sequence_length == 1 else {"steps": steps}
 
-    def _window(self, sample: dict, native_scale: float | None, rng: torch.Generator | None) -> tuple | None:
-        """A random patch position shared by every step of a sample: HR ``(y, x, size)`` and LR likewise."""
+    def _window(self, seq: Sequence, native_scale: float | None, rng: torch.Generator | None) -> tuple | None:
+        """A random patch position shared by every step of a sample: HR ``(y, x, h, w)`` and LR likewise."""
         if self.patch is None:
             return None
-        full = next(iter(sample["hr"].values()), None)
-        height, width = full.shape[-2:] if full is not None else (0, 0)
+        height, width = seq.shape(seq.hr)
         size = self.patch
         if height < size or width < size:
             raise SceneError(f"patch size {size} is larger than the frame ({height}x{width})")
@@ -313,34 +285,37 @@ class FrameDataset(Dataset):
             size -= size % step  # e.g. 64 -> 63 at 3x: the largest patch that a native LR patch covers exactly
             y = int(torch.randint(0, (height - size) // step + 1, (), generator=rng)) * step
             x = int(torch.randint(0, (width - size) // step + 1, (), generator=rng)) * step
-            return (y, x, size), (y // step, x // step, size // step)
+            return (y, x, size, size), (y // step, x // step, size // step, size // step)
         y = int(torch.randint(0, height - size + 1, (), generator=rng))
         x = int(torch.randint(0, width - size + 1, (), generator=rng))
-        return (y, x, size), None
+        return (y, x, size, size), None
 
-    @staticmethod
-    def _crop(sample: dict, window: tuple | None) -> None:
-        if window is None:
-            return
-        for role, box in (
-            ("hr", window[0]),
-            ("prev", window[0]),
-            ("prev2", window[0]),
-            ("lr", window[1]),
-            ("prev_lr", window[1]),
-        ):
-            if box is not None:
-                y, x, size = box
-                sample[role] = {k: v[..., y : y + size, x : x + size] for k, v in sample[role].items()}
+
+def _margin(motion: Tensor, shape: tuple[int, int]) -> int:
+    """Pixels on every side that a backward warp by ``motion`` reaches beyond its window (bilinear taps included).
+
+    At most the frame's size: history from farther away is outside the frame, zeros either way."""
+    finite = motion[torch.isfinite(motion)]
+    reach = float(finite.abs().max()) if finite.numel() else 0.0
+    return min(int(np.ceil(reach)) + 1, max(shape) + 1)
 
 
 class Collate:
-    """Stack samples and turn their buffers into the batch's named tensors (runs in loader workers)."""
+    """Stack samples into a :class:`~wdss.data.preprocess.RawBatch` (runs in loader workers) and build the batch
+    from it there, or, with ``on_device``, leave that to the device (the DataModule's ``on_after_batch_transfer``)."""
 
-    def __init__(self, keys: Iterable[str], preprocessing: Preprocessing, scale: float | tuple[float, float]):
+    def __init__(
+        self,
+        keys: Iterable[str],
+        preprocessing: Preprocessing,
+        scale: float | tuple[float, float],
+        *,
+        on_device: bool = False,
+    ) -> None:
         self.keys = set(keys) | {"scale"}
         self.prep = preprocessing
         self.scale = scale
+        self.on_device = on_device
 
     def pick_scale(self, seed: int | None = None) -> float:
         """The batch's scale: fixed, or drawn from the range (from the first sample's seed when it has one)."""
@@ -350,31 +325,53 @@ class Collate:
             return float(low + (high - low) * torch.rand((), generator=rng).item())
         return float(self.scale)
 
-    def __call__(self, samples: list[dict]) -> dict:
+    def __call__(self, samples: list[dict]) -> dict | RawBatch:
         first = samples[0]["steps"][0] if "steps" in samples[0] else samples[0]
         scale = self.pick_scale(first.get("seed"))
         if "steps" in samples[0]:  # sequences: one batch per time step, all at the batch's scale
             length = len(samples[0]["steps"])
-            return {"steps": [self.batch([s["steps"][t] for s in samples], scale) for t in range(length)]}
-        return self.batch(samples, scale)
+            return {"steps": [self._one(self.raw([s["steps"][t] for s in samples], scale)) for t in range(length)]}
+        return self._one(self.raw(samples, scale))
+
+    def _one(self, raw: RawBatch) -> dict | RawBatch:
+        return raw if self.on_device else raw.build()
 
     def batch(self, samples: list[dict], scale: float) -> dict:
-        def stack(role: str) -> dict[str, Tensor]:
-            names = samples[0][role].keys()
-            return {name: torch.stack([s[role][name] for s in samples]) for name in names}
+        """The batch of ``samples`` at ``scale``, built here."""
+        return self.raw(samples, scale).build()
 
-        roles = {role: stack(role) for role in ROLES}
+    def raw(self, samples: list[dict], scale: float) -> RawBatch:
+        """The samples stacked by role; previous frames padded with zeros to the batch's largest margin."""
+        margins = {role: max(s["margins"][role] for s in samples) for role in ("prev", "prev2")}
+
+        def stack(role: str) -> dict[str, Tensor]:
+            pad = [margins.get(role, 0) - s["margins"].get(role, 0) for s in samples]
+            return {
+                name: torch.stack(
+                    [
+                        F.pad(s[role][name], (p, p, p, p)) if p else s[role][name]
+                        for s, p in zip(samples, pad, strict=True)
+                    ]
+                )
+                for name in samples[0][role]
+            }
+
         need = requirements(self.keys - {"scale"}, self.prep)
-        height, width = next(iter(roles["hr"].values())).shape[-2:] if roles["hr"] else (0, 0)
-        for low, high in (("lr", "hr"), ("prev_lr", "prev")):  # no native folder: point-sample the HR frame
-            if need[low] and not roles[low]:
-                size = lr_size(height, width, scale)
-                roles[low] = {name: point_sample(roles[high][name], size) for name in need[low]}
-        batch = build_batch(self.keys, roles, self.prep)
-        batch["scale"] = torch.full((len(samples),), scale)
-        batch["sequence"] = [s["sequence"] for s in samples]
-        batch["frame"] = torch.tensor([s["frame"] for s in samples])
-        return batch
+        roles = {role: stack(role) for role in ROLES}
+        return RawBatch(
+            keys=tuple(sorted(self.keys - {"scale"})),
+            prep=self.prep,
+            scale=scale,
+            roles=roles,
+            ranges={
+                role: torch.tensor([s["ranges"][role] for s in samples], dtype=torch.float32)
+                for role in samples[0]["ranges"]
+            },
+            margins=margins,
+            sampled={low: tuple(sorted(need[low])) for low in _HR_OF if need[low] and not roles[low]},
+            sequence=[s["sequence"] for s in samples],
+            frame=torch.tensor([s["frame"] for s in samples]),
+        )
 
 
 def _mix(seed: int, epoch: int | None, index: int) -> int:
@@ -428,62 +425,3 @@ class EpochSampler(Sampler):
         else:
             order = self._block()
         return iter([(int(v) % self.size, self.epoch * self.repeats + int(v) // self.size) for v in order])
-
-
-def brdf_of(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
-    """The safe BRDF factor (1 where F vanishes) of a set of buffers."""
-    if prep.brdf == "split_sum":
-        raw = split_sum_brdf(
-            buffers["base_color"], buffers["metallic"], buffers["specular"], buffers["roughness"], buffers["nov"]
-        )
-    else:
-        raw = extranet_brdf(buffers["base_color"], buffers["metallic"], buffers["specular"])
-    return safe_brdf(raw)
-
-
-def build_batch(keys: set[str], roles: dict[str, dict[str, Tensor]], prep: Preprocessing) -> dict[str, Tensor]:
-    """The named batch tensors from stacked ``(N, C, H, W)`` buffers of each role."""
-    hr, lr, prev, prev_lr = roles["hr"], roles["lr"], roles["prev"], roles["prev_lr"]
-    batch: dict[str, Tensor] = {}
-    if "target" in keys:
-        batch["target"] = hr["color"]
-    if "brdf" in keys:
-        batch["brdf"] = brdf_of(hr, prep)
-    if "lr" in keys or "lr_brdf" in keys:
-        lr_brdf = brdf_of(lr, prep) if (prep.demodulate or "lr_brdf" in keys) else None
-        if "lr" in keys:
-            batch["lr"] = demodulate(lr["color"], lr_brdf) if prep.demodulate else lr["color"]
-        if "lr_brdf" in keys:
-            batch["lr_brdf"] = lr_brdf
-    if "lr_color" in keys:
-        batch["lr_color"] = lr["color"]
-    if "gbuffer" in keys:
-        batch["gbuffer"] = torch.cat([hr[name] for name in GBUFFER_STACK], dim=1)
-    if "spatial_mask" in keys:
-        t = prep.spatial_thresholds
-        batch["spatial_mask"] = spatial_mask(
-            hr, lr, depth_threshold=t["depth"], normal_threshold=t["normal"], albedo_threshold=t["albedo"]
-        )
-    if "history" in keys or "temporal_mask" in keys:
-        motion = hr["motion"]
-        if "history" in keys:
-            previous = demodulate(prev["color"], brdf_of(prev, prep)) if prep.demodulate else prev["color"]
-            batch["history"] = warp_backward(previous, motion)
-        if "temporal_mask" in keys:
-            names = ("depth", "base_color", "normal")
-            stacked = warp_backward(torch.cat([prev[name] for name in names], dim=1), motion)  # one warp for all
-            warped = dict(zip(names, stacked.split([1, 3, 3], 1), strict=True))
-            batch["temporal_mask"] = temporal_mask(hr, warped)
-    if "motion" in keys:
-        batch["motion"] = hr["motion"]
-    if "lr_gbuffer" in keys:
-        batch["lr_gbuffer"] = torch.cat([lr["depth"], lr["normal"]], dim=1)
-    if "prev_lr_color" in keys:
-        batch["prev_lr_color"] = prev_lr["color"]
-    if "prev_lr_gbuffer" in keys:
-        batch["prev_lr_gbuffer"] = torch.cat([prev_lr["depth"], prev_lr["normal"]], dim=1)
-    if "history2" in keys:  # frame t-2 warped to t-1, then to t
-        prev2 = roles["prev2"]
-        older = demodulate(prev2["color"], brdf_of(prev2, prep)) if prep.demodulate else prev2["color"]
-        batch["history2"] = warp_backward(warp_backward(older, prev["motion"]), hr["motion"])
-    return batch

@@ -29,12 +29,17 @@ class ExrError(ValueError):
 
 
 def read_exr(
-    source: str | os.PathLike | bytes, channels: Iterable[str] | None = None, *, name: str | None = None
+    source: str | os.PathLike | bytes,
+    channels: Iterable[str] | None = None,
+    *,
+    name: str | None = None,
+    keep_dtype: bool = False,
 ) -> dict[str, np.ndarray]:
     """Read the named ``channels`` (all when ``None``) of a one-part EXR as float32 ``(H, W)`` planes.
 
     ``source`` is a path or the file's bytes (e.g. a zip member); ``name`` is what errors call it.
     The File API decodes the whole part; only the requested planes are converted and returned.
+    ``keep_dtype``: half channels stay float16 and float channels float32 (the packer stores them bit for bit).
     """
     label, part = _open(source, name, header_only=False)
     available = part.channels
@@ -42,6 +47,8 @@ def read_exr(
     missing = [c for c in wanted if c not in available]
     if missing:
         raise ExrError(f"{label} has no channel {', '.join(missing)} (it has {', '.join(sorted(available))})")
+    if keep_dtype:
+        return {c: np.asarray(available[c].pixels) for c in wanted}
     return {c: np.asarray(available[c].pixels, dtype=np.float32) for c in wanted}
 
 

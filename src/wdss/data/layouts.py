@@ -138,13 +138,13 @@ class Source:
         with zipfile.ZipFile(self.path) as archive:
             return self._member(archive, name)
 
-    def read(self, name: str, channels: Iterable[str]) -> dict[str, np.ndarray]:
+    def read(self, name: str, channels: Iterable[str], *, keep_dtype: bool = False) -> dict[str, np.ndarray]:
         self.opens += 1
         if self.path.is_dir():
-            return read_exr(self.path / name, channels, name=self.describe(name))
+            return read_exr(self.path / name, channels, name=self.describe(name), keep_dtype=keep_dtype)
         if self._zip is None:
             self._zip = zipfile.ZipFile(self.path)
-        return read_exr(self._member(self._zip, name), channels, name=self.describe(name))
+        return read_exr(self._member(self._zip, name), channels, name=self.describe(name), keep_dtype=keep_dtype)
 
     def size(self, name: str) -> tuple[int, int]:
         """The ``(H, W)`` of one file, from its header (not counted in :attr:`opens`: no pixels are decoded)."""
@@ -316,6 +316,7 @@ class Sequence:
         self.frames = self.layout.frames(self._index, self.hr)
         self.sanitized: dict[str, int] = {}
         self._sizes: dict[tuple[int, str], tuple[str, tuple[int, int]]] = {}  # (height, stem) -> first file, size
+        self._shapes: dict[int, tuple[int, int]] = {}
         # At discovery: a malformed sidecar fails before training starts.
         self._cameras, self.frame_rate = self._read_sidecar()
 
@@ -412,6 +413,41 @@ class Sequence:
         for name, slots in by_file.items():
             self._check_size(frame, height, slots[0][1].stem, name, shapes[name])
         return out
+
+    def shape(self, height: int) -> tuple[int, int]:
+        """The ``(H, W)`` of the sequence's frames at ``height``, from the header of a file of its first frame."""
+        if height not in self._shapes:
+            frame = self.frames[0]
+            buffer = next((b for b in ("color", "depth", *BUFFERS) if self.has(b, height, frame)), None)
+            if buffer is None:
+                raise SceneError(f"sequence {self.name!r}, frame {frame}: no buffer at {height}P")
+            self._shapes[height] = self.source.size(self.file(buffer, height, frame))
+        return self._shapes[height]
+
+    def read_window(
+        self,
+        frame: int,
+        height: int,
+        buffers: Iterable[str],
+        window: tuple[int, int, int, int] | None,
+        *,
+        sanitize: bool = False,
+        depth_far: float | None = None,
+        depth_range: bool = False,
+    ) -> tuple[dict[str, np.ndarray], tuple[float, float] | None]:
+        """The ``(y, x, h, w)`` window of buffers of one frame (zeros beyond the frame; ``None``: the whole frame)
+        and, with ``depth_range``, the whole frame's depth range after the ``depth_far`` clamp.
+
+        An EXR file is decoded whole; the depth plane is read for the range even when ``depth`` is not asked for.
+        """
+        from wdss.data.preprocess import depth_range as range_of
+        from wdss.data.sampling import crop
+
+        wanted = list(dict.fromkeys(buffers))
+        extra = depth_range and "depth" not in wanted
+        full = self.read(frame, height, [*wanted, "depth"] if extra else wanted, sanitize=sanitize)
+        found = range_of(full["depth"], depth_far) if depth_range else None
+        return {k: crop(full[k], window) for k in wanted}, found
 
     def _check_size(self, frame: int, height: int, stem: str, name: str, size: tuple[int, int]) -> None:
         """A file must have the size of the same file of the sequence's first frame at its resolution.

@@ -10,11 +10,12 @@ covers the same extent, so its effective scale is ``H / h`` per axis (``s`` exac
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-__all__ = ["flip", "lr_size", "point_sample", "scale_matches"]
+__all__ = ["crop", "flip", "lr_size", "point_sample", "scale_matches"]
 
 
 def lr_size(height: int, width: int, scale: float) -> tuple[int, int]:
@@ -29,6 +30,21 @@ def point_sample(hr: Tensor, size: tuple[int, int]) -> Tensor:
     if tuple(size) == tuple(hr.shape[-2:]):
         return hr
     return F.interpolate(hr, size=tuple(size), mode="nearest-exact")
+
+
+def crop(array: np.ndarray, window: tuple[int, int, int, int] | None) -> np.ndarray:
+    """The ``(y, x, h, w)`` window of a ``(C, H, W)`` array; zeros where it reaches beyond the frame."""
+    if window is None:
+        return array
+    y, x, h, w = window
+    height, width = array.shape[-2:]
+    if y >= 0 and x >= 0 and y + h <= height and x + w <= width:
+        return array[..., y : y + h, x : x + w]
+    out = np.zeros((*array.shape[:-2], h, w), dtype=array.dtype)
+    y0, y1, x0, x1 = max(y, 0), min(y + h, height), max(x, 0), min(x + w, width)
+    if y0 < y1 and x0 < x1:
+        out[..., y0 - y : y1 - y, x0 - x : x1 - x] = array[..., y0:y1, x0:x1]
+    return out
 
 
 def scale_matches(hr_height: int, lr_height: int, scale: float, tol: float = 1e-6) -> bool:

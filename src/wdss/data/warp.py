@@ -15,13 +15,20 @@ from torch import Tensor
 __all__ = ["normalize_normals", "spatial_mask", "temporal_mask", "warp_backward"]
 
 
-def warp_backward(previous: Tensor, motion: Tensor) -> Tensor:
-    """Previous-frame buffers ``(N, C, H, W)`` resampled into the current frame by ``motion`` ``(N, 2, H, W)``."""
-    n, _, h, w = previous.shape
-    if motion.shape[-2:] != (h, w):
-        raise ValueError(f"motion vectors are {tuple(motion.shape[-2:])}, the warped buffers {(h, w)}")
-    ys = torch.arange(h, device=motion.device, dtype=motion.dtype).view(1, h, 1)
-    xs = torch.arange(w, device=motion.device, dtype=motion.dtype).view(1, 1, w)
+def warp_backward(previous: Tensor, motion: Tensor, *, origin: tuple[int, int] = (0, 0)) -> Tensor:
+    """Previous-frame buffers ``(N, C, H', W')`` resampled into the current frame by ``motion`` ``(N, 2, H, W)``.
+
+    ``origin``: where the current window's top-left pixel is in ``previous`` (rows, columns); ``(m, m)`` for
+    previous buffers cut with a margin of ``m`` pixels on every side, so that history from outside the window is
+    found. Without an origin, both cover the same pixels.
+    """
+    _, _, h, w = previous.shape
+    mh, mw = motion.shape[-2:]
+    oy, ox = origin
+    if (oy, ox) == (0, 0) and (mh, mw) != (h, w):
+        raise ValueError(f"motion vectors are {(mh, mw)}, the warped buffers {(h, w)}")
+    ys = torch.arange(oy, oy + mh, device=motion.device, dtype=motion.dtype).view(1, mh, 1)
+    xs = torch.arange(ox, ox + mw, device=motion.device, dtype=motion.dtype).view(1, 1, mw)
     # Pixel centres in grid_sample's normalised coordinates (align_corners=False: -1 and 1 are the edges).
     src_x = (xs + 0.5 - motion[:, 0]) * (2.0 / w) - 1.0
     src_y = (ys + 0.5 + motion[:, 1]) * (2.0 / h) - 1.0

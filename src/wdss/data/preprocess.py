@@ -1,0 +1,208 @@
+"""Per-pixel preprocessing of a stacked batch: raw buffers -> the batch's named tensors, wherever it runs.
+
+The loader's workers read, crop and mirror raw buffers (:mod:`wdss.data.dataset`) and stack them into a
+:class:`RawBatch`. :meth:`RawBatch.build` then does all the per-pixel tensor work: it cleans the buffers (far
+depth, depth normalised by each frame's range, unit normals, colour clip), point-samples the low-resolution
+frame where no native one was read, computes BRDF factors, demodulates, warps the history and computes the
+masks. It runs either in the workers (CPU machines) or on the accelerator after the transfer
+(:meth:`wdss.data.datamodule.SceneDataModule.on_after_batch_transfer`): the same function on the same raw
+batch, so both placements give one batch.
+
+Previous frames of a training patch are read with a margin (``margins``: pixels on every side, the extent of
+the motion vectors in the patch plus one for the bilinear taps), so that history warped from outside the
+patch is history, not zeros; the warp samples them with that offset.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf, split_sum_brdf
+from wdss.data.sampling import lr_size, point_sample
+from wdss.data.warp import normalize_normals, spatial_mask, temporal_mask, warp_backward
+
+__all__ = ["GBUFFER_STACK", "Preprocessing", "RawBatch", "brdf_of", "build_batch", "clean", "depth_range"]
+
+# The high-resolution G-buffer stack of the network, in channel order (11 channels).
+GBUFFER_STACK = ("base_color", "depth", "normal", "specular", "roughness", "nov", "metallic")
+
+
+@dataclass
+class Preprocessing:
+    """How buffers become batch tensors (the ``data.preprocessing`` config)."""
+
+    brdf: str = "extranet"  # extranet | split_sum
+    demodulate: bool = True  # lr and history are irradiance (colour / F) rather than colour
+    depth_far: float | None = 100.0  # depth beyond this is background: set to 0 (the authors' loader)
+    depth_normalize: bool = True  # per-frame min-max normalisation of depth (DFASR); LR by its HR frame's range
+    color_max: float | None = None  # clip HDR colour to [0, color_max] at load (the authors used 10)
+    sanitize: bool = False  # replace non-finite values by 0 and count them, instead of failing
+    spatial_thresholds: dict = field(default_factory=lambda: {"depth": 0.01, "normal": 0.9, "albedo": 0.1})
+
+    def __post_init__(self) -> None:
+        if self.brdf not in ("extranet", "split_sum"):
+            raise ValueError(f"data.preprocessing.brdf must be 'extranet' or 'split_sum', got {self.brdf!r}")
+
+    @property
+    def brdf_buffers(self) -> set[str]:
+        extra = {"roughness", "nov"} if self.brdf == "split_sum" else set()
+        return {"base_color", "metallic", "specular"} | extra
+
+
+def _far(depth: Tensor, far: float | None) -> Tensor:
+    return depth if far is None else torch.where(depth > far, torch.zeros_like(depth), depth)
+
+
+def depth_range(depth: np.ndarray | Tensor, far: float | None) -> tuple[float, float]:
+    """The min-max normalisation range of one whole frame's depth, after the far clamp (float32 values)."""
+    t = _far(torch.as_tensor(np.asarray(depth, dtype=np.float32)), far)
+    return float(t.min()), float(t.max())
+
+
+def clean(buffers: dict[str, Tensor], prep: Preprocessing, ranges: Tensor | None) -> dict[str, Tensor]:
+    """Stacked ``(N, C, H, W)`` buffers cleaned: far depth set to 0 and normalised by each sample's frame range
+    (``ranges``: ``(N, 2)`` min and max), normals of unit length, colour clipped to ``color_max``."""
+    out = {}
+    for name, t in buffers.items():
+        if name == "depth":
+            t = _far(t, prep.depth_far)
+            if prep.depth_normalize:
+                lo, hi = (ranges[:, i].to(t.dtype).view(-1, 1, 1, 1) for i in (0, 1))
+                t = (t - lo) / (1e-6 + torch.clamp(hi, min=1.0) - lo)
+        elif name == "normal":
+            t = normalize_normals(t)
+        elif name == "color" and prep.color_max is not None:
+            t = t.clamp(0.0, prep.color_max)
+        out[name] = t
+    return out
+
+
+def _crop(t: Tensor, margin: int, height: int, width: int) -> Tensor:
+    return t[..., margin : margin + height, margin : margin + width] if margin else t
+
+
+@dataclass
+class RawBatch:
+    """A stacked batch of raw buffers per role and what turns it into the batch (:meth:`build`).
+
+    ``roles``: role -> buffer -> ``(N, C, H, W)`` float32 (``prev`` and ``prev2`` with their ``margins``);
+    ``ranges``: role -> ``(N, 2)`` depth ranges of each sample's whole frame; ``sampled``: LR role -> buffers to
+    point-sample from its HR role. Moves to a device with :meth:`to` (Lightning calls it) and pins with
+    :meth:`pin_memory` (the DataLoader does).
+    """
+
+    keys: tuple[str, ...]
+    prep: Preprocessing
+    scale: float
+    roles: dict[str, dict[str, Tensor]]
+    ranges: dict[str, Tensor]
+    margins: dict[str, int]
+    sampled: dict[str, tuple[str, ...]]
+    sequence: list[str]
+    frame: Tensor
+
+    def _apply(self, fn) -> RawBatch:
+        roles = {role: {k: fn(v) for k, v in buffers.items()} for role, buffers in self.roles.items()}
+        return replace(self, roles=roles, ranges={k: fn(v) for k, v in self.ranges.items()}, frame=fn(self.frame))
+
+    def to(self, device: torch.device | str, non_blocking: bool = False) -> RawBatch:
+        return self._apply(lambda t: t.to(device, non_blocking=non_blocking))
+
+    def pin_memory(self) -> RawBatch:
+        return self._apply(lambda t: t.pin_memory())
+
+    def __len__(self) -> int:
+        return len(self.sequence)
+
+    def build(self) -> dict:
+        """The named batch tensors (keys documented in :mod:`wdss.data.datamodule`), on the raw batch's device."""
+        prep = self.prep
+        roles = {role: clean(buffers, prep, self.ranges.get(role)) for role, buffers in self.roles.items()}
+        height, width = next(iter(roles["hr"].values())).shape[-2:] if roles["hr"] else (0, 0)
+        for low, high in (("lr", "hr"), ("prev_lr", "prev")):  # no native folder: point-sample the HR frame
+            if self.sampled.get(low):
+                size = lr_size(height, width, self.scale)
+                margin = self.margins.get(high, 0)
+                roles[low] = {
+                    n: point_sample(_crop(roles[high][n], margin, height, width), size) for n in self.sampled[low]
+                }
+        batch = build_batch(set(self.keys), roles, prep, self.margins)
+        batch["scale"] = torch.full((len(self),), self.scale, device=self.frame.device)
+        batch["sequence"] = list(self.sequence)
+        batch["frame"] = self.frame
+        return batch
+
+
+def brdf_of(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
+    """The safe BRDF factor (1 where F vanishes) of a set of buffers."""
+    if prep.brdf == "split_sum":
+        raw = split_sum_brdf(
+            buffers["base_color"], buffers["metallic"], buffers["specular"], buffers["roughness"], buffers["nov"]
+        )
+    else:
+        raw = extranet_brdf(buffers["base_color"], buffers["metallic"], buffers["specular"])
+    return safe_brdf(raw)
+
+
+def build_batch(
+    keys: Iterable[str],
+    roles: dict[str, dict[str, Tensor]],
+    prep: Preprocessing,
+    margins: dict[str, int] | None = None,
+) -> dict[str, Tensor]:
+    """The named batch tensors from cleaned, stacked ``(N, C, H, W)`` buffers of each role.
+
+    ``margins``: pixels on every side by which ``prev`` and ``prev2`` extend beyond the current frame's window.
+    """
+    keys = set(keys)
+    m1, m2 = (margins or {}).get("prev", 0), (margins or {}).get("prev2", 0)
+    hr, lr, prev, prev_lr = roles["hr"], roles["lr"], roles["prev"], roles["prev_lr"]
+    batch: dict[str, Tensor] = {}
+    if "target" in keys:
+        batch["target"] = hr["color"]
+    if "brdf" in keys:
+        batch["brdf"] = brdf_of(hr, prep)
+    if "lr" in keys or "lr_brdf" in keys:
+        lr_brdf = brdf_of(lr, prep) if (prep.demodulate or "lr_brdf" in keys) else None
+        if "lr" in keys:
+            batch["lr"] = demodulate(lr["color"], lr_brdf) if prep.demodulate else lr["color"]
+        if "lr_brdf" in keys:
+            batch["lr_brdf"] = lr_brdf
+    if "lr_color" in keys:
+        batch["lr_color"] = lr["color"]
+    if "gbuffer" in keys:
+        batch["gbuffer"] = torch.cat([hr[name] for name in GBUFFER_STACK], dim=1)
+    if "spatial_mask" in keys:
+        t = prep.spatial_thresholds
+        batch["spatial_mask"] = spatial_mask(
+            hr, lr, depth_threshold=t["depth"], normal_threshold=t["normal"], albedo_threshold=t["albedo"]
+        )
+    if "history" in keys or "temporal_mask" in keys:
+        motion = hr["motion"]
+        if "history" in keys:
+            previous = demodulate(prev["color"], brdf_of(prev, prep)) if prep.demodulate else prev["color"]
+            batch["history"] = warp_backward(previous, motion, origin=(m1, m1))
+        if "temporal_mask" in keys:
+            names = ("depth", "base_color", "normal")
+            stacked = torch.cat([prev[name] for name in names], dim=1)  # one warp for all
+            warped = dict(zip(names, warp_backward(stacked, motion, origin=(m1, m1)).split([1, 3, 3], 1), strict=True))
+            batch["temporal_mask"] = temporal_mask(hr, warped)
+    if "motion" in keys:
+        batch["motion"] = hr["motion"]
+    if "lr_gbuffer" in keys:
+        batch["lr_gbuffer"] = torch.cat([lr["depth"], lr["normal"]], dim=1)
+    if "prev_lr_color" in keys:
+        batch["prev_lr_color"] = prev_lr["color"]
+    if "prev_lr_gbuffer" in keys:
+        batch["prev_lr_gbuffer"] = torch.cat([prev_lr["depth"], prev_lr["normal"]], dim=1)
+    if "history2" in keys:  # frame t-2 warped to t-1 (on t-1's window), then to t
+        prev2 = roles["prev2"]
+        older = demodulate(prev2["color"], brdf_of(prev2, prep)) if prep.demodulate else prev2["color"]
+        onto_prev = warp_backward(older, prev["motion"], origin=(m2 - m1, m2 - m1))
+        batch["history2"] = warp_backward(onto_prev, hr["motion"], origin=(m1, m1))
+    return batch
