@@ -1,4 +1,5 @@
-"""An independent reprojection of planar depth with the sidecar cameras (the oracle for motion vectors)."""
+"""The rendered conventions, checked against independent oracles: motion vectors against a reprojection of
+planar depth with the sidecar cameras, the sky's against directions at infinity, normals of unit length."""
 
 from __future__ import annotations
 
@@ -6,6 +7,10 @@ import json
 from pathlib import Path
 
 import numpy as np
+
+from wdss.data import Sequence
+
+G_BUFFERS = ["color", "depth", "motion", "normal", "roughness", "metallic", "base_color"]
 
 
 def load_sidecar(folder: Path) -> tuple[dict, dict[int, np.ndarray]]:
@@ -25,3 +30,30 @@ def reproject(depth: np.ndarray, current: np.ndarray, previous: np.ndarray, fx_f
     x_prev = cx + fx * prev[..., 0] / -prev[..., 2]
     y_prev = cy + fy * prev[..., 1] / -prev[..., 2]
     return world[..., :3], np.stack([x - x_prev, y_up - y_prev])
+
+
+def check_conventions(folder: Path, *, tolerance: float = 0.05) -> dict[int, dict[str, np.ndarray]]:
+    """Assert the conventions on every HR frame after the first of the sequence at ``folder``: the median
+    motion error of surfaces and of the sky is below ``tolerance`` pixels, normals have unit length on surfaces
+    and are 0 on the sky. Returns each frame's buffers, with ``world`` (H, W, 3 points) and ``surface`` added."""
+    meta, cameras = load_sidecar(folder)
+    intrinsics = meta["intrinsics"]["fx_fy_cx_cy"]
+    seq = Sequence(folder)
+    out = {}
+    for frame in seq.frames[1:]:
+        buffers = seq.read(frame, seq.hr, G_BUFFERS)
+        depth = buffers["depth"][0].astype(np.float64)
+        surface = depth > 0
+        assert surface.any(), f"frame {frame}: nothing but sky"
+        world, expected = reproject(depth, cameras[frame], cameras[frame - 1], intrinsics)
+        error = np.hypot(*(buffers["motion"] - expected))
+        assert np.median(error[surface]) < tolerance, f"frame {frame}: motion against reprojected depth"
+        if (~surface).any():  # the sky moves as directions at infinity do
+            _, at_infinity = reproject(np.full_like(depth, 1e7), cameras[frame], cameras[frame - 1], intrinsics)
+            sky_error = np.hypot(*(buffers["motion"] - at_infinity))[~surface]
+            assert np.median(sky_error) < tolerance, f"frame {frame}: sky motion against the camera rotation"
+        length = np.linalg.norm(buffers["normal"], axis=0)
+        np.testing.assert_allclose(length[surface], 1.0, atol=1e-3, err_msg=f"frame {frame}: normal length")
+        assert np.all(length[~surface] == 0.0)
+        out[frame] = {**buffers, "world": world, "surface": surface}
+    return out

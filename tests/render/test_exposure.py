@@ -38,3 +38,12 @@ def test_black_and_non_finite_frames():
     color[0, 0, 0] = np.nan
     color[1, 0, 0] = np.inf
     assert np.isfinite(auto_exposure(color)) and auto_exposure(color) > 0
+
+
+def test_a_black_background_does_not_count_towards_the_median():
+    """A scene file lit only by its own lights has an empty black background (no world)."""
+    rng = np.random.default_rng(3)
+    color = rng.uniform(0.5, 1.5, (3, 40, 50)) * 0.02
+    color[:, :30] = 0.0  # 60 % of the frame
+    exposure = auto_exposure(color)
+    assert abs(np.median(luminance(color[:, 30:] * exposure)) - MIDDLE_GREY) < 1e-9

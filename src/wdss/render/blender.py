@@ -25,7 +25,7 @@ except ImportError as err:  # pragma: no cover - exercised only without the extr
         "(or `pip install -c constraints.txt 'bpy==5.0.1'`)"
     ) from err
 
-__all__ = ["BlenderScene"]
+__all__ = ["AOVS", "BlenderScene", "add_hdri_and_sun", "configure_cycles", "render_passes"]
 
 AOVS = (("basecolor", "COLOR"), ("roughness", "VALUE"), ("metallic", "VALUE"))
 
@@ -114,59 +114,23 @@ class BlenderScene:
         self.denoise = denoise
         self.filter_width = filter_width
         bpy.ops.wm.read_factory_settings(use_empty=True)
-        scene = bpy.context.scene
-        self.scene = scene
-        scene.render.engine = "CYCLES"
-        cycles = scene.cycles
-        cycles.device = "CPU"
-        cycles.use_adaptive_sampling = False
-        cycles.seed = spec.seed
-        cycles.use_animated_seed = True
-        cycles.max_bounces = 6
-        scene.render.use_motion_blur = False  # the Vector pass needs it off
-        if threads:
-            scene.render.threads_mode = "FIXED"
-            scene.render.threads = threads
-        scene.render.film_transparent = False
-        layer = scene.view_layers[0]
-        for flag in ("use_pass_combined", "use_pass_z", "use_pass_normal", "use_pass_vector", "use_pass_position"):
-            setattr(layer, flag, True)
-        for name, kind in AOVS:
-            aov = layer.aovs.add()
-            aov.name, aov.type = name, kind
-        image = scene.render.image_settings
-        image.media_type = "MULTI_LAYER_IMAGE"
-        image.file_format = "OPEN_EXR_MULTILAYER"
-        image.color_depth = "32"
-        image.exr_codec = "ZIP"
-        image.use_exr_interleave = True  # one-part EXR (Blender 5 writes multi-part files otherwise)
+        self.scene = bpy.context.scene
+        configure_cycles(self.scene, self.scene.view_layers[0], seed=spec.seed, threads=threads)
+        self.scene.cycles.max_bounces = 6
         self._world()
         self._objects()
         self._camera()
 
     def _world(self) -> None:
         spec = self.spec
-        world = bpy.data.worlds.new("world")
-        self.scene.world = world
-        world.use_nodes = True
-        nt = world.node_tree
-        background = nt.nodes["Background"]
-        env = nt.nodes.new("ShaderNodeTexEnvironment")
-        path = os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights", "world", f"{spec.hdri}.exr")
-        env.image = bpy.data.images.load(path)
-        mapping = nt.nodes.new("ShaderNodeMapping")
-        mapping.inputs["Rotation"].default_value = (0.0, 0.0, spec.hdri_rotation)
-        coords = nt.nodes.new("ShaderNodeTexCoord")
-        nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
-        nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
-        nt.links.new(env.outputs["Color"], background.inputs["Color"])
-        background.inputs["Strength"].default_value = spec.hdri_strength
-        sun = bpy.data.lights.new("sun", "SUN")
-        sun.energy = spec.sun_energy
-        sun.angle = math.radians(1.5)
-        sun_object = bpy.data.objects.new("sun", sun)
-        sun_object.rotation_euler = spec.sun_rotation
-        self.scene.collection.objects.link(sun_object)
+        add_hdri_and_sun(
+            self.scene,
+            hdri=spec.hdri,
+            strength=spec.hdri_strength,
+            rotation=spec.hdri_rotation,
+            sun_rotation=spec.sun_rotation,
+            sun_energy=spec.sun_energy,
+        )
 
     def _objects(self) -> None:
         spec = self.spec
@@ -215,23 +179,93 @@ class BlenderScene:
     def render(self, frame: int, width: int, height: int, *, samples: int | None = None) -> dict[str, np.ndarray]:
         """Render ``frame`` at ``width x height``; the passes as ``(C, H, W)`` float32 arrays, rows top-down."""
         self.pose(frame)
-        render = self.scene.render
-        render.resolution_x, render.resolution_y = width, height
-        render.resolution_percentage = 100
-        cycles = self.scene.cycles
-        cycles.samples = samples or self.samples
-        cycles.filter_width = self.filter_width
-        cycles.use_denoising = self.denoise
-        if self.denoise:
-            cycles.denoiser = "OPENIMAGEDENOISE"
-            cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
-            cycles.denoising_prefilter = "NONE" if min(width, height) < 200 else "ACCURATE"
-        with tempfile.TemporaryDirectory() as tmp:
-            render.filepath = str(Path(tmp) / "frame.exr")
-            with _quiet():
-                bpy.ops.render.render(write_still=True)
-            planes = read_exr(render.filepath)
-        return _group_passes(planes)
+        return render_passes(
+            self.scene,
+            width,
+            height,
+            samples=samples or self.samples,
+            denoise=self.denoise,
+            filter_width=self.filter_width,
+        )
+
+
+def configure_cycles(scene, layer, *, seed: int, threads: int = 0) -> None:
+    """Cycles on the CPU with fixed sampling, motion blur off (the Vector pass needs it), every pass wdss reads
+    enabled on ``layer`` (AOVs included) and one-part multilayer float EXR output."""
+    scene.render.engine = "CYCLES"
+    cycles = scene.cycles
+    cycles.device = "CPU"
+    cycles.use_adaptive_sampling = False
+    cycles.seed = seed
+    cycles.use_animated_seed = True
+    scene.render.use_motion_blur = False
+    if threads:
+        scene.render.threads_mode = "FIXED"
+        scene.render.threads = threads
+    scene.render.film_transparent = False
+    for flag in ("use_pass_combined", "use_pass_z", "use_pass_normal", "use_pass_vector", "use_pass_position"):
+        setattr(layer, flag, True)
+    present = {aov.name for aov in layer.aovs}
+    for name, kind in AOVS:
+        if name not in present:
+            aov = layer.aovs.add()
+            aov.name, aov.type = name, kind
+    image = scene.render.image_settings
+    image.media_type = "MULTI_LAYER_IMAGE"
+    image.file_format = "OPEN_EXR_MULTILAYER"
+    image.color_depth = "32"
+    image.exr_codec = "ZIP"
+    image.use_exr_interleave = True  # one-part EXR (Blender 5 writes multi-part files otherwise)
+
+
+def add_hdri_and_sun(
+    scene, *, hdri: str, strength: float, rotation: float, sun_rotation: list[float], sun_energy: float
+) -> None:
+    """A new world lit by one of the HDRIs shipped with Blender (``spec.HDRIS``), and a sun."""
+    world = bpy.data.worlds.new("world")
+    scene.world = world
+    world.use_nodes = True
+    nt = world.node_tree
+    background = nt.nodes["Background"]
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    path = os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights", "world", f"{hdri}.exr")
+    env.image = bpy.data.images.load(path)
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, rotation)
+    coords = nt.nodes.new("ShaderNodeTexCoord")
+    nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    nt.links.new(env.outputs["Color"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = strength
+    sun = bpy.data.lights.new("sun", "SUN")
+    sun.energy = sun_energy
+    sun.angle = math.radians(1.5)
+    sun_object = bpy.data.objects.new("sun", sun)
+    sun_object.rotation_euler = sun_rotation
+    scene.collection.objects.link(sun_object)
+
+
+def render_passes(
+    scene, width: int, height: int, *, samples: int, denoise: bool, filter_width: float
+) -> dict[str, np.ndarray]:
+    """Render the scene's current frame at ``width x height``; the passes as ``(C, H, W)`` float32 arrays."""
+    render = scene.render
+    render.resolution_x, render.resolution_y = width, height
+    render.resolution_percentage = 100
+    cycles = scene.cycles
+    cycles.samples = samples
+    cycles.filter_width = filter_width
+    cycles.use_denoising = denoise
+    if denoise:
+        cycles.denoiser = "OPENIMAGEDENOISE"
+        cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+        cycles.denoising_prefilter = "NONE" if min(width, height) < 200 else "ACCURATE"
+    with tempfile.TemporaryDirectory() as tmp:
+        render.filepath = str(Path(tmp) / "frame.exr")
+        with _quiet():
+            bpy.ops.render.render(write_still=True)
+        planes = read_exr(render.filepath)
+    return _group_passes(planes)
 
 
 @contextlib.contextmanager

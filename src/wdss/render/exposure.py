@@ -7,7 +7,8 @@ chosen from quick probes of its first, middle and last frames, so that its media
 engine frames (DFASR's Unreal sample: pre-tonemap median 0.19, tone-mapped median 0.47, 0.1 % saturated) --
 unless that would saturate more than 1 % of the probes, in which case the bright end decides, within 1.5 stops.
 The factor is recorded in ``sequence.json`` (``exposure``) and applied to every frame and every resolution
-alike, so motion, history and demodulation stay consistent.
+alike, so motion, history and demodulation stay consistent. Pixels of exactly zero radiance (the empty black
+background of a scene file lit only by its own lights) do not count towards the median.
 """
 
 from __future__ import annotations
@@ -27,11 +28,14 @@ def auto_exposure(color: np.ndarray, *, middle_grey: float = MIDDLE_GREY, satura
     """The factor that brings a frame's median luminance to ``middle_grey``, lowered when more than
     ``saturated_share`` of its colour values would then exceed :data:`SATURATION`.
 
-    ``color``: ``(3, H, W)`` linear radiance (non-finite values are ignored). Returns a positive float.
+    ``color``: ``(3, H, W)`` linear radiance (non-finite values are ignored; black pixels do not count towards
+    the median). Returns a positive float.
     """
     color = np.nan_to_num(np.asarray(color, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0).clip(0.0, None)
-    median = float(np.median(luminance(color)))
-    if median <= 0.0:  # an all-black first frame: leave the radiance as rendered
+    lit = luminance(color)
+    lit = lit[lit > 0.0]
+    median = float(np.median(lit)) if lit.size else 0.0
+    if median <= 0.0:  # an all-black frame: leave the radiance as rendered
         return 1.0
     exposure = middle_grey / median
     bright = float(np.quantile(color, 1.0 - saturated_share))

@@ -29,6 +29,7 @@ from wdss.data.exr import write_exr
 from wdss.data.layouts import UnrealLayout
 from wdss.data.sampling import lr_size, point_sample
 from wdss.render.exposure import auto_exposure
+from wdss.render.scene_file import check_scene, file_digest
 from wdss.render.spec import SceneSpec, camera_pose, intrinsics, random_scene
 
 __all__ = ["frame_files", "preset_settings", "render_preset", "render_sequence", "render_sequences"]
@@ -88,17 +89,25 @@ def render_sequence(
     compression: str = "zip",
     half: bool = True,
     exposure: float | str = "auto",
+    scene: str | Path | None = None,
+    camera: str = "auto",
+    lighting: str = "auto",
     progress: Progress | None = None,
     spec: SceneSpec | None = None,
 ) -> Path:
     """Render one sequence into ``out_dir/name`` and return that folder. ``resolution`` is (width, height).
 
-    The scene is ``random_scene(seed)`` unless a ``spec`` is given. ``exposure``: the factor every frame's
+    The scene is ``random_scene(seed)`` unless a ``spec`` is given, or the ``.glb``/``.gltf``/``.blend`` file
+    ``scene`` framed by ``camera`` and lit as ``lighting`` says (:mod:`wdss.render.scene_file`; ``seed``
+    then seeds the fitted camera path and the added lighting). ``exposure``: the factor every frame's
     radiance is multiplied by, or ``"auto"``: chosen from probe renders by :func:`wdss.render.exposure.auto_exposure`
     and recorded in ``sequence.json`` (so a resumed render applies the same factor).
     """
     from wdss.render.convert import to_buffers
 
+    scene_path = check_scene(scene, camera, lighting, where=f"sequence {name!r}")
+    if scene_path is not None and spec is not None:
+        raise ValueError(f"sequence {name!r}: give a procedural spec or a scene file (render.scene), not both")
     if lr_mode not in ("downsample", "native"):
         raise ValueError(f"render.lr_mode must be 'downsample' or 'native', got {lr_mode!r}")
     width, height = resolution
@@ -109,10 +118,7 @@ def render_sequence(
         if width % s or height % s:
             raise ValueError(f"render.resolution {width}x{height} is not divisible by scale {s}")
     folder = Path(out_dir) / name
-    folder.mkdir(parents=True, exist_ok=True)
     heights = [height] + [height // s for s in scales]
-    spec = spec or random_scene(seed, min_objects=objects[0], max_objects=objects[1])
-    lens = spec.camera.lens
     settings = {
         "frames": frames,
         "resolution": [width, height],
@@ -127,6 +133,9 @@ def render_sequence(
         "exposure": exposure,
         "blender": "bpy 5.0.1, Cycles CPU",
     }
+    if scene_path is not None:  # only for files: procedural sidecars keep their settings (and resume)
+        settings["scene"] = {"file": scene_path.name, "sha256": file_digest(scene_path)}
+        settings["camera"], settings["lighting"] = camera, lighting
     sidecar = folder / "sequence.json"
     previous_meta = json.loads(sidecar.read_text()) if sidecar.exists() else None
     if previous_meta and (previous_meta.get("seed") != seed or previous_meta.get("settings") != settings):
@@ -134,6 +143,36 @@ def render_sequence(
             f"{folder} holds a sequence rendered with other settings (seed {previous_meta.get('seed')}); "
             "remove it or render into another folder"
         )
+    todo = [f for f in range(frames + 1) if not all(p.exists() for p in frame_files(folder, f, heights))]
+    task = progress.add_task(name, total=frames + 1, completed=frames + 1 - len(todo)) if progress else None
+    blender_scene: Any = None
+    if scene_path is None:
+        spec = spec or random_scene(seed, min_objects=objects[0], max_objects=objects[1])
+        lens = spec.camera.lens
+        poses = {f: camera_pose(spec.camera, f) for f in range(-1, frames + 1)}
+        description = spec.to_dict()
+    else:
+        if previous_meta and not todo:
+            return folder
+        from wdss.render.scene_file import FileScene
+
+        # Loaded before the folder is made: a file with no mesh (or no camera for camera=file) creates nothing.
+        blender_scene = FileScene(
+            scene_path,
+            seed=seed,
+            frames=frames,
+            resolution=(width, height),
+            camera=camera,
+            lighting=lighting,
+            samples=samples,
+            denoise=denoise,
+            filter_width=filter_width,
+            threads=threads,
+            where=f"sequence {name!r}",
+            digest=settings["scene"]["sha256"],
+        )
+        lens, poses, description = blender_scene.lens, blender_scene.poses, blender_scene.description
+    folder.mkdir(parents=True, exist_ok=True)
     meta = {
         "name": name,
         "seed": seed,
@@ -149,8 +188,8 @@ def render_sequence(
             "motion": "HR pixels, current minus previous screen position, y up",
             "depth": "planar camera depth, background 0",
         },
-        "scene": spec.to_dict(),
-        "frames": [{"frame": f, "camera_to_world": camera_pose(spec.camera, f).tolist()} for f in range(frames + 1)],
+        "scene": description,
+        "frames": [{"frame": f, "camera_to_world": poses[f].tolist()} for f in range(frames + 1)],
         "render_seconds": (previous_meta or {}).get("render_seconds", {}),
         # The pre-exposure applied to the radiance of every frame (None until the probes have chosen it).
         "exposure": exposure if exposure != "auto" else (previous_meta or {}).get("exposure"),
@@ -158,21 +197,20 @@ def render_sequence(
     _write_json(sidecar, meta)
     for stale in folder.rglob(".*.tmp"):  # a render killed while writing leaves only its temporary file
         stale.unlink()
-    todo = [f for f in range(frames + 1) if not all(p.exists() for p in frame_files(folder, f, heights))]
-    task = progress.add_task(name, total=frames + 1, completed=frames + 1 - len(todo)) if progress else None
     if not todo:
         return folder
-    from wdss.render.blender import BlenderScene
+    if blender_scene is None:
+        from wdss.render.blender import BlenderScene
 
-    scene = BlenderScene(spec, samples=samples, denoise=denoise, filter_width=filter_width, threads=threads)
+        blender_scene = BlenderScene(spec, samples=samples, denoise=denoise, filter_width=filter_width, threads=threads)
+    scene = blender_scene
     if meta["exposure"] is None:  # recorded before any file is written: a resumed render applies the same
         meta["exposure"] = _probe_exposure(scene, frames, width, height)
         _write_json(sidecar, meta)
     for frame in todo:
         start = time.perf_counter()
-        camera = camera_pose(spec.camera, frame)
-        previous = camera_pose(spec.camera, frame - 1)
-        hr = to_buffers(scene.render(frame, width, height), camera=camera, previous_camera=previous, lens=lens)
+        camera_to_world, previous = poses[frame], poses[frame - 1]
+        hr = to_buffers(scene.render(frame, width, height), camera=camera_to_world, previous_camera=previous, lens=lens)
         hr["color"] = hr["color"] * np.float32(meta["exposure"])
         write_unreal_frame(folder / f"{height}P", frame, hr, compression, half)
         for s in scales:
@@ -181,7 +219,9 @@ def render_sequence(
                 lr = {k: point_sample(torch.from_numpy(v)[None], size)[0].numpy() for k, v in hr.items()}
             else:
                 passes = scene.render(frame, size[1], size[0], samples=lr_samples)
-                lr = to_buffers(passes, camera=camera, previous_camera=previous, lens=lens, motion_scale=float(s))
+                lr = to_buffers(
+                    passes, camera=camera_to_world, previous_camera=previous, lens=lens, motion_scale=float(s)
+                )
                 lr["color"] = lr["color"] * np.float32(meta["exposure"])
             write_unreal_frame(folder / f"{size[0]}P", frame, lr, compression, half)
         meta["render_seconds"][str(frame)] = round(time.perf_counter() - start, 3)
@@ -206,9 +246,18 @@ def _probe_exposure(scene: Any, frames: int, width: int, height: int) -> float:
 
 
 def render_sequences(out_dir: str | Path, sequences: Iterable[Mapping[str, Any]], **settings: Any) -> list[Path]:
-    """Render every ``{name, seed[, frames]}`` of ``sequences`` into ``out_dir`` with a shared progress bar."""
+    """Render every ``{name, seed[, frames, scene, camera, lighting, ...]}`` of ``sequences`` into ``out_dir``
+    with a shared progress bar; a sequence's own keys override ``settings``.
+
+    Every sequence's scene settings are checked before the first is rendered."""
     out_dir = Path(out_dir)
     sequences = [dict(s) for s in sequences]
+    for index, seq in enumerate(sequences):
+        if "name" not in seq or "seed" not in seq:
+            raise ValueError(f"render.sequences[{index}] needs a name and a seed; got {seq}")
+        merged = {**settings, **seq}
+        where = f"sequence {seq['name']!r}"
+        check_scene(merged.get("scene"), merged.get("camera", "auto"), merged.get("lighting", "auto"), where=where)
     columns = (
         TextColumn("[bold]{task.description}"),
         BarColumn(),

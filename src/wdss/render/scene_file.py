@@ -1,0 +1,342 @@
+"""Scenes from files (``render.scene=path.{glb,gltf,blend}``): checked, loaded into Blender, lit, framed.
+
+* Checks before anything is created (:func:`check_scene`): the extension is one of :data:`SCENE_KINDS`, the
+  file exists, ``camera`` is one of :data:`CAMERAS` and ``lighting`` one of :data:`LIGHTINGS`; loading then
+  refuses a file with no geometry to render. Errors name the config key, the sequence and the file.
+* Loading uses Blender's own readers: the glTF 2.0 importer into an empty scene, or ``.blend`` opened as it
+  is (its active scene and view layer; other view layers, compositing and the sequencer off), with Python in
+  the file never run (``use_scripts=False``, auto-execution off): a scene file is data.
+* The file's materials, lights and cameras are kept; :func:`wdss.render.materials.wire_aovs` sends each
+  material's base colour, roughness and metallic to the AOVs (fallbacks recorded in the sidecar).
+* Lighting (``lighting``): ``auto`` keeps the file's when it has a light or a world with an environment or
+  sky texture, and otherwise adds, as the procedural scenes have, one of Blender's HDRIs and a sun (seeded);
+  ``hdri`` adds them in any case; ``file`` never does.
+* Camera (``camera``): ``file`` renders the file's camera (the scene's, else the first by name) as
+  animated; ``orbit`` and ``fly`` fit a seeded path to the scene's bounds
+  (:mod:`wdss.render.camera_path`); ``auto`` is ``file`` when the file's camera moves, else ``orbit``. The
+  file's camera is made a pinhole with Blender's default 36 mm sensor (same field of view at the rendered
+  size, no lens shift, no depth of field), so one ``intrinsics`` entry describes every frame.
+* Frame 0 of the sequence is the file's first frame: the ``.blend`` scene's start frame, or a glTF's
+  earliest keyframe (0 without animation).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["CAMERAS", "LIGHTINGS", "SCENE_KINDS", "FileScene", "check_scene", "file_digest"]
+
+log = logging.getLogger(__name__)
+
+SCENE_KINDS = {".glb": "gltf", ".gltf": "gltf", ".blend": "blend"}
+CAMERAS = ("auto", "file", "orbit", "fly")
+LIGHTINGS = ("auto", "file", "hdri")
+
+
+def check_scene(scene: str | Path | None, camera: str, lighting: str, *, where: str) -> Path | None:
+    """The resolved scene file (None for a procedural scene) after checking the ``scene``, ``camera`` and
+    ``lighting`` settings of one sequence (``where``, e.g. ``"sequence 'a'"``, goes into the errors)."""
+    if camera not in CAMERAS:
+        raise ValueError(f"render.camera ({where}) must be one of {', '.join(CAMERAS)}; got {camera!r}")
+    if lighting not in LIGHTINGS:
+        raise ValueError(f"render.lighting ({where}) must be one of {', '.join(LIGHTINGS)}; got {lighting!r}")
+    if scene is None:
+        if camera in ("file", "fly") or lighting == "file":
+            setting = f"camera={camera}" if camera in ("file", "fly") else f"lighting={lighting}"
+            raise ValueError(f"render.{setting} ({where}) needs a scene file: set render.scene")
+        return None
+    path = Path(str(scene)).expanduser()
+    if path.suffix.lower() not in SCENE_KINDS:
+        raise ValueError(f"render.scene ({where}): {path} is not a scene file wdss reads ({', '.join(SCENE_KINDS)})")
+    if not path.is_file():
+        raise FileNotFoundError(f"render.scene ({where}): {path} does not exist")
+    return path.resolve()
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of the file (a resumed render refuses a changed scene)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _orthonormal(matrix: np.ndarray) -> np.ndarray:
+    """A camera-to-world matrix without scale (Cycles ignores a camera's scale)."""
+    out = np.array(matrix, dtype=np.float64)
+    for i in range(3):
+        out[:3, i] /= np.linalg.norm(out[:3, i])
+    return out
+
+
+class FileScene:
+    """A scene file in Blender, framed by its own or a fitted camera; renders like
+    :class:`wdss.render.blender.BlenderScene`. ``poses`` (frames -1..frames+1), ``lens`` and ``description``
+    (for the sidecar) are known once it is built."""
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        seed: int,
+        frames: int,
+        resolution: tuple[int, int],
+        camera: str = "auto",
+        lighting: str = "auto",
+        samples: int = 8,
+        denoise: bool = True,
+        filter_width: float = 0.01,
+        threads: int = 0,
+        where: str = "",
+        digest: str | None = None,
+    ):
+        import bpy
+
+        from wdss.render.blender import _quiet, configure_cycles
+        from wdss.render.materials import GEOMETRY_TYPES, wire_aovs
+
+        self.samples, self.denoise, self.filter_width = samples, denoise, filter_width
+        self.kind = SCENE_KINDS[path.suffix.lower()]
+        where = f"render.scene ({where}): {path}" if where else f"render.scene: {path}"
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        bpy.context.preferences.filepaths.use_scripts_auto_execute = False
+        importer_log = logging.getLogger("glTFImporter")  # one INFO line per node otherwise
+        level = importer_log.level
+        importer_log.setLevel(logging.WARNING)
+        try:
+            with _quiet():
+                if self.kind == "gltf":
+                    bpy.ops.import_scene.gltf(filepath=str(path))
+                else:
+                    bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
+        except RuntimeError as err:
+            raise ValueError(f"{where} could not be read: {str(err).strip()}") from err
+        finally:
+            importer_log.setLevel(level)
+        scene = self.scene = bpy.context.scene
+        self.offset = self._first_frame()
+        scene.frame_set(self.offset)
+        geometry = [o for o in scene.objects if o.type in GEOMETRY_TYPES and not o.hide_render]
+        bounds = self._bounds(geometry)
+        if bounds is None:
+            raise ValueError(f"{where} has no mesh to render")
+        lo, hi = bounds
+        layer = bpy.context.view_layer
+        for other in scene.view_layers:
+            other.use = other == layer
+        configure_cycles(scene, layer, seed=seed, threads=threads)
+        render = scene.render
+        render.use_compositing = render.use_sequencer = render.use_border = False
+        render.pixel_aspect_x = render.pixel_aspect_y = 1.0
+        scene.cycles.film_exposure = 1.0  # radiance in scene units: the sequence's exposure is calibrated later
+        materials = wire_aovs(scene.objects)
+        lights = self._light(lighting, seed)
+        width, height = resolution
+        render.resolution_x, render.resolution_y, render.resolution_percentage = width, height, 100
+        mode, camera_info = self._frame(camera, seed, frames, lo, hi, width, height, where)
+        self.description = {
+            "file": str(path),
+            "kind": self.kind,
+            "sha256": digest or file_digest(path),
+            "frame_offset": self.offset,
+            "bounds": [lo.round(6).tolist(), hi.round(6).tolist()],
+            "camera": {"mode": mode, **camera_info},
+            "lighting": lights,
+            "material_fallbacks": materials,
+        }
+
+    # -- loading -------------------------------------------------------------------------------------------------
+    def _first_frame(self) -> int:
+        import bpy
+
+        if self.kind == "blend":
+            return int(self.scene.frame_start)
+        starts = [action.frame_range[0] for action in bpy.data.actions]
+        return int(np.floor(min(starts))) if starts else 0
+
+    def _last_frame(self) -> int:
+        import bpy
+
+        if self.kind == "blend":
+            return int(self.scene.frame_end)
+        ends = [action.frame_range[1] for action in bpy.data.actions]
+        return int(np.ceil(max(ends))) if ends else self.offset
+
+    @staticmethod
+    def _bounds(objects) -> tuple[np.ndarray, np.ndarray] | None:
+        import bpy
+
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        corners = []
+        for obj in objects:
+            evaluated = obj.evaluated_get(depsgraph)
+            if obj.type == "MESH" and not len(evaluated.data.polygons):
+                continue
+            local = np.array([list(c) for c in evaluated.bound_box], dtype=np.float64)
+            if not local.size:
+                continue
+            matrix = np.array(evaluated.matrix_world, dtype=np.float64)
+            corners.append(local @ matrix[:3, :3].T + matrix[:3, 3])
+        if not corners:
+            return None
+        points = np.concatenate(corners)
+        return points.min(0), points.max(0)
+
+    def _light(self, lighting: str, seed: int) -> dict[str, Any]:
+        from wdss.render.blender import add_hdri_and_sun
+        from wdss.render.spec import HDRIS
+
+        scene = self.scene
+        lights = sorted(o.name for o in scene.objects if o.type == "LIGHT" and not o.hide_render)
+        world = scene.world
+        environment = bool(
+            world and world.node_tree and any(n.type in ("TEX_ENVIRONMENT", "TEX_SKY") for n in world.node_tree.nodes)
+        )
+        mode = lighting if lighting != "auto" else ("file" if lights or environment else "hdri")
+        info: dict[str, Any] = {"mode": mode, "file_lights": lights, "file_environment": environment}
+        if mode == "hdri":
+            rng = np.random.default_rng([seed, 9])
+            added = {
+                "hdri": str(rng.choice(HDRIS)),
+                "strength": float(rng.uniform(0.5, 1.5)),
+                "rotation": float(rng.uniform(0, 2 * np.pi)),
+                "sun_rotation": [float(rng.uniform(0.3, 1.2)), 0.0, float(rng.uniform(0, 2 * np.pi))],
+                "sun_energy": float(rng.uniform(1.5, 5.0)),
+            }
+            add_hdri_and_sun(scene, **added)
+            info.update(added)
+        elif not lights and not environment:
+            log.warning("lighting=file but the scene has no light and no environment: only emitters light it")
+        return info
+
+    # -- camera --------------------------------------------------------------------------------------------------
+    def _file_camera(self):
+        scene = self.scene
+        if scene.camera is not None and scene.camera.type == "CAMERA":
+            return scene.camera
+        cameras = sorted((o for o in scene.objects if o.type == "CAMERA"), key=lambda o: o.name)
+        return cameras[0] if cameras else None
+
+    def _evaluated_poses(self, obj, frames: int) -> dict[int, np.ndarray]:
+        poses = {}
+        for f in range(-1, frames + 2):
+            self.scene.frame_set(self.offset + f)
+            poses[f] = _orthonormal(np.array(obj.matrix_world))
+        self.scene.frame_set(self.offset)
+        return poses
+
+    def _frame(self, camera, seed, frames, lo, hi, width, height, where) -> tuple[str, dict[str, Any]]:
+        import bpy
+        from mathutils import Matrix
+
+        from wdss.render.camera_path import fit_camera
+
+        scene = self.scene
+        own = self._file_camera()
+        file_poses = self._evaluated_poses(own, frames) if own is not None else None
+        moving = file_poses is not None and any(
+            not np.allclose(p, file_poses[0], atol=1e-6) for p in file_poses.values()
+        )
+        mode = camera if camera != "auto" else ("file" if moving else "orbit")
+        if mode == "file":
+            if own is None:
+                raise ValueError(f"{where} has no camera (render.camera=file): use camera=orbit or camera=fly")
+            self.lens = self._pinhole(own, frames, width, height, where)
+            self.poses = file_poses
+            scene.camera = own
+            if self.offset + frames > self._last_frame():
+                log.warning(
+                    "%s: frames %d..%d go beyond the file's animation (last frame %d): the camera holds still there",
+                    where,
+                    self.offset,
+                    self.offset + frames,
+                    self._last_frame(),
+                )
+            return mode, {"object": own.name, "moving": moving}
+        data = bpy.data.cameras.new("wdss_camera")
+        data.sensor_width, data.sensor_fit = 36.0, "AUTO"
+        obj = bpy.data.objects.new("wdss_camera", data)
+        scene.collection.objects.link(obj)
+        scene.camera = obj
+        try:
+            path, poses, attempt = fit_camera(mode, seed, lo, hi, self._ray_caster(), frames, width / height)
+        except ValueError as err:
+            raise ValueError(f"{where}: render.camera={mode}: {err}") from err
+        data.lens = self.lens = path.lens
+        for f, pose in poses.items():
+            obj.matrix_world = Matrix(pose.tolist())
+            obj.keyframe_insert("location", frame=self.offset + f)
+            obj.keyframe_insert("rotation_euler", frame=self.offset + f)
+        self.poses = self._evaluated_poses(obj, frames)
+        return mode, {"object": None, "attempt": attempt, "path": path.to_dict()}
+
+    def _pinhole(self, obj, frames: int, width: int, height: int, where: str) -> float:
+        """Make the file's camera a 36 mm-sensor pinhole with the same horizontal field of view at
+        ``width x height``; its lens in mm. Refuses what one ``intrinsics`` entry cannot describe."""
+        import bpy
+
+        data = obj.data
+        if data.type != "PERSP":
+            raise ValueError(f"{where}: camera {obj.name!r} is {data.type}; wdss renders perspective cameras")
+        scene = self.scene
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        focals = set()
+        for f in range(-1, frames + 2):
+            scene.frame_set(self.offset + f)
+            projection = obj.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=width, y=height)
+            focals.add(round(projection[0][0] * width / 2, 4))
+        scene.frame_set(self.offset)
+        if len(focals) > 1:
+            raise ValueError(f"{where}: camera {obj.name!r} zooms (its focal length is animated); use camera=orbit")
+        if data.shift_x or data.shift_y:
+            log.warning("%s: camera %r has a lens shift; wdss renders it centred", where, obj.name)
+        data.shift_x = data.shift_y = 0.0
+        data.dof.use_dof = False
+        lens = focals.pop() * 36.0 / max(width, height)
+        data.sensor_fit, data.sensor_width, data.lens = "AUTO", 36.0, lens
+        return lens
+
+    def _ray_caster(self):
+        import bpy
+        from mathutils import Vector
+
+        scene, offset = self.scene, self.offset
+        animated = bool(bpy.data.actions)
+        state = {"frame": 0}
+
+        def ray_cast(frame: int, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            if animated and frame != state["frame"]:
+                scene.frame_set(offset + frame)
+                state["frame"] = frame
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+            distances = np.full(len(origins), np.inf)
+            normals = np.zeros((len(origins), 3))
+            for i, (origin, direction) in enumerate(zip(origins, directions, strict=True)):
+                hit, location, normal, *_ = scene.ray_cast(depsgraph, Vector(origin), Vector(direction))
+                if hit:
+                    distances[i] = float(np.dot(np.array(location) - origin, direction))
+                    normals[i] = normal
+            return distances, normals
+
+        return ray_cast
+
+    # -- rendering -----------------------------------------------------------------------------------------------
+    def render(self, frame: int, width: int, height: int, *, samples: int | None = None) -> dict[str, np.ndarray]:
+        """Render ``frame`` at ``width x height``; the passes as ``(C, H, W)`` float32 arrays, rows top-down."""
+        from wdss.render.blender import render_passes
+
+        self.scene.frame_set(self.offset + frame)
+        return render_passes(
+            self.scene,
+            width,
+            height,
+            samples=samples or self.samples,
+            denoise=self.denoise,
+            filter_width=self.filter_width,
+        )
