@@ -28,10 +28,18 @@ key                shape                        meaning
 With ``sequence_length = T > 1`` a training batch is ``{"steps": [batch_1, ..., batch_T]}``: T consecutive
 frames, the same patch and mirroring in each, one scale; validation and test batches stay single frames, in
 order.
+
+Sources (``format``): ``exr`` reads the scenes' EXR files; ``packed`` a packed store (``packed_root``, default
+``<root>.packed``, written by ``python -m wdss.data.pack``), which reads a patch's tiles instead of whole frames;
+``auto`` the packed copy of every sequence that has an up-to-date one holding the buffers needed, the EXR files of
+the others. Where the per-pixel preprocessing runs (``preprocess_on``): ``loader`` in the loader's workers,
+``device`` on the model's device after the transfer (:meth:`SceneDataModule.on_after_batch_transfer`); ``auto``
+picks ``device`` when the trainer runs on an accelerator, ``loader`` on a CPU. Both give the same batch.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -40,12 +48,18 @@ import lightning as L
 import torch
 from torch.utils.data import DataLoader
 
-from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing
+from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing, requirements
 from wdss.data.layouts import SceneError, Sequence, discover_sequences
+from wdss.data.packed import PackedSequence, discover_packed, is_packed
+from wdss.data.preprocess import RawBatch
 
 __all__ = ["SceneDataModule"]
 
+log = logging.getLogger(__name__)
+
 SPLITS = ("train", "val", "test")
+FORMATS = ("auto", "exr", "packed")
+PLACEMENTS = ("auto", "loader", "device")
 
 
 def _parse_split(entries: Iterable[Any]) -> tuple[list[str], dict[str, tuple[int, int]]]:
@@ -98,9 +112,19 @@ class SceneDataModule(L.LightningDataModule):
         seed: int = 0,
         prepare: Callable[[Path], None] | None = None,
         test_inputs: Iterable[str] | None = None,
+        format: str = "auto",  # noqa: A002 (the config key's name)
+        packed_root: str | Path | None = None,
+        preprocess_on: str = "auto",
     ) -> None:
         super().__init__()
+        if format not in FORMATS:
+            raise ValueError(f"data.format must be one of {', '.join(FORMATS)}, got {format!r}")
+        if preprocess_on not in PLACEMENTS:
+            raise ValueError(f"data.preprocess_on must be one of {', '.join(PLACEMENTS)}, got {preprocess_on!r}")
         self.root = Path(root)
+        self.format = format
+        self.packed_root = Path(packed_root) if packed_root else self.root.with_name(f"{self.root.name}.packed")
+        self.preprocess_on = preprocess_on
         unknown = set(splits) - set(SPLITS)
         if unknown:
             raise ValueError(f"data.splits has unknown split(s) {sorted(unknown)}: expected train, val, test")
@@ -135,20 +159,52 @@ class SceneDataModule(L.LightningDataModule):
         return float(scale) if not isinstance(scale, tuple) else round(sum(scale) / 2, 3)
 
     def prepare_data(self) -> None:
-        if self.prepare is not None and not self.root.exists():
+        # A packed store is read without its EXR source: nothing to render for it.
+        if self.prepare is not None and not self.root.exists() and self.format != "packed":
             self.prepare(self.root)
 
-    def _sequences(self, split: str) -> tuple[list[Sequence], dict[str, tuple[int, int]]]:
+    def _sequences(self, split: str, keys: Iterable[str]) -> tuple[list, dict[str, tuple[int, int]]]:
         if split not in self.splits:
             raise SceneError(f"data.splits has no {split!r} split")
         names, ranges = self.splits[split]
-        return discover_sequences(self.root, names, self.layout), ranges
+        if self.format == "exr":
+            return discover_sequences(self.root, names, self.layout), ranges
+        if self.format == "packed":
+            sequences = discover_packed(self.packed_root, names)
+            for seq in sequences:
+                changed = seq.stale()
+                if changed:
+                    raise SceneError(
+                        f"packed sequence {seq.name!r} ({seq.folder}) is out of date: {changed}; pack it again "
+                        f"(python -m wdss.data.pack root={self.root} out={self.packed_root}) or set data.format=exr"
+                    )
+            return sequences, ranges
+        need = set().union(*requirements(keys, self.prep).values())
+        return [self._auto(name, need) for name in names], ranges
+
+    def _auto(self, name: str, need: set[str]) -> Sequence | PackedSequence:
+        """The packed copy of a sequence where it is complete, up to date and holds ``need``; else its EXR files."""
+        folder = self.packed_root / name
+        if is_packed(folder):
+            try:
+                packed = PackedSequence(folder)
+            except SceneError as err:
+                log.warning("data.format=auto: reading %s from EXR files: %s", name, err)
+            else:
+                missing = sorted(b for b in need if not packed.has(b, packed.hr))
+                changed = packed.stale()
+                if not missing and not changed:
+                    return packed
+                why = changed or f"it lacks {', '.join(missing)}"
+                log.warning("data.format=auto: reading %s from EXR files, not its packed copy: %s", name, why)
+        return discover_sequences(self.root, [name], self.layout)[0]
 
     def _dataset(self, split: str, scale: float | tuple[float, float], patch: int | None) -> FrameDataset:
-        sequences, ranges = self._sequences(split)
+        keys = self.test_inputs if split == "test" else self.inputs
+        sequences, ranges = self._sequences(split, keys)
         return FrameDataset(
             sequences,
-            self.test_inputs if split == "test" else self.inputs,
+            keys,
             scale=scale,
             patch=patch,
             preprocessing=self.prep,
@@ -189,9 +245,24 @@ class SceneDataModule(L.LightningDataModule):
             num_workers=self.num_workers,
             pin_memory=self.pin_memory,
             persistent_workers=self.num_workers > 0,
-            collate_fn=Collate(dataset.keys, self.prep, dataset.scale),
+            collate_fn=Collate(dataset.keys, self.prep, dataset.scale, on_device=self._on_device()),
             generator=generator,
         )
+
+    def _on_device(self) -> bool:
+        """Whether the per-pixel preprocessing runs on the trainer's device (in on_after_batch_transfer)."""
+        if self.preprocess_on != "auto":
+            return self.preprocess_on == "device"
+        trainer = self.trainer
+        return trainer is not None and trainer.strategy.root_device.type != "cpu"
+
+    def on_after_batch_transfer(self, batch: Any, dataloader_idx: int) -> Any:
+        """Build a raw batch on the device it was moved to (``preprocess_on: device``); other batches pass."""
+        if isinstance(batch, RawBatch):
+            return batch.build()
+        if isinstance(batch, dict) and "steps" in batch and any(isinstance(s, RawBatch) for s in batch["steps"]):
+            return {**batch, "steps": [s.build() if isinstance(s, RawBatch) else s for s in batch["steps"]]}
+        return batch
 
     def train_dataloader(self) -> DataLoader:
         return self._loader(self.datasets["train"], self.batch_size, train=True)

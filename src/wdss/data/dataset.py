@@ -234,7 +234,10 @@ class FrameDataset(Dataset):
             else:  # history before the first frame, kept with zeros (first_frame="zeros"): they stay zero when cleaned
                 h, w = box[2:] if box is not None else seq.shape(height)
                 raw, found = {b: np.zeros((BUFFERS[b], h, w), np.float32) for b in buffers}, (0.0, 1.0)
-            out[role] = {k: torch.from_numpy(np.asarray(v, dtype=np.float32)) for k, v in raw.items()}
+            # Half buffers stay half up to the preprocessing (half the bytes to move); normals are mirrored in float.
+            out[role] = {
+                k: torch.from_numpy(v).float() if k == "normal" else torch.from_numpy(v) for k, v in raw.items()
+            }
             if want_range:
                 out["ranges"][role] = found
         return out
@@ -295,8 +298,7 @@ def _margin(motion: Tensor, shape: tuple[int, int]) -> int:
     """Pixels on every side that a backward warp by ``motion`` reaches beyond its window (bilinear taps included).
 
     At most the frame's size: history from farther away is outside the frame, zeros either way."""
-    finite = motion[torch.isfinite(motion)]
-    reach = float(finite.abs().max()) if finite.numel() else 0.0
+    reach = float(torch.nan_to_num(motion.float().abs(), nan=0.0, posinf=0.0).max()) if motion.numel() else 0.0
     return min(int(np.ceil(reach)) + 1, max(shape) + 1)
 
 

@@ -339,32 +339,9 @@ class Sequence:
         return self._cameras.get(frame)
 
     def _read_sidecar(self) -> tuple[dict[int, torch.Tensor], float]:
-        """Camera rotations by frame and the frame rate (``fps``, default :data:`DEFAULT_FRAME_RATE`) of
-        ``sequence.json``."""
         if not self.source.has("sequence.json"):
             return {}, DEFAULT_FRAME_RATE
-        where = self.source.describe("sequence.json")
-        raw = self.source.read_bytes("sequence.json")
-        try:
-            meta = json.loads(raw)
-        except ValueError as err:  # JSONDecodeError and UnicodeDecodeError
-            raise SceneError(f"{where} is not valid JSON: {err}") from err
-        cameras = {}
-        try:
-            for entry in meta.get("frames", []):
-                matrix = torch.tensor(entry["camera_to_world"], dtype=torch.float32)
-                if matrix.ndim != 2 or min(matrix.shape) < 3:
-                    raise ValueError(f"camera_to_world of frame {entry['frame']} has shape {list(matrix.shape)}")
-                cameras[int(entry["frame"])] = matrix[:3, :3]
-        except (AttributeError, KeyError, TypeError, ValueError, RuntimeError) as err:
-            raise SceneError(
-                f"{where}: malformed 'frames' ({type(err).__name__}: {err}); expected a list of "
-                "{frame: N, camera_to_world: 4x4 matrix}"
-            ) from err
-        fps = meta.get("fps", DEFAULT_FRAME_RATE)
-        if isinstance(fps, bool) or not isinstance(fps, int | float) or not 0 < fps <= 1000:
-            raise SceneError(f"{where}: 'fps' must be a number of frames per second, got {fps!r}")
-        return cameras, float(fps)
+        return parse_sidecar(self.source.read_bytes("sequence.json"), self.source.describe("sequence.json"))
 
     def read(self, frame: int, height: int, buffers: Iterable[str], *, sanitize: bool = False) -> dict[str, np.ndarray]:
         """The requested buffers of one frame at one resolution, as float32 ``(C, H, W)`` arrays.
@@ -466,6 +443,31 @@ class Sequence:
                 f"the sequence's first frame at {height}P is {expected[1]}x{expected[0]} "
                 f"({self.source.describe(reference)}); every frame of a sequence needs one size per resolution"
             )
+
+
+def parse_sidecar(raw: bytes, where: str) -> tuple[dict[int, torch.Tensor], float]:
+    """Camera rotations by frame and the frame rate (``fps``, default :data:`DEFAULT_FRAME_RATE`) of a
+    ``sequence.json``; ``where`` names it in errors."""
+    try:
+        meta = json.loads(raw)
+    except ValueError as err:  # JSONDecodeError and UnicodeDecodeError
+        raise SceneError(f"{where} is not valid JSON: {err}") from err
+    cameras = {}
+    try:
+        for entry in meta.get("frames", []):
+            matrix = torch.tensor(entry["camera_to_world"], dtype=torch.float32)
+            if matrix.ndim != 2 or min(matrix.shape) < 3:
+                raise ValueError(f"camera_to_world of frame {entry['frame']} has shape {list(matrix.shape)}")
+            cameras[int(entry["frame"])] = matrix[:3, :3]
+    except (AttributeError, KeyError, TypeError, ValueError, RuntimeError) as err:
+        raise SceneError(
+            f"{where}: malformed 'frames' ({type(err).__name__}: {err}); expected a list of "
+            "{frame: N, camera_to_world: 4x4 matrix}"
+        ) from err
+    fps = meta.get("fps", DEFAULT_FRAME_RATE)
+    if isinstance(fps, bool) or not isinstance(fps, int | float) or not 0 < fps <= 1000:
+        raise SceneError(f"{where}: 'fps' must be a number of frames per second, got {fps!r}")
+    return cameras, float(fps)
 
 
 def discover_sequences(root: str | Path, names: Iterable[str] | None = None, layout: str = "auto") -> list[Sequence]:

@@ -90,7 +90,8 @@ def _crop(t: Tensor, margin: int, height: int, width: int) -> Tensor:
 class RawBatch:
     """A stacked batch of raw buffers per role and what turns it into the batch (:meth:`build`).
 
-    ``roles``: role -> buffer -> ``(N, C, H, W)`` float32 (``prev`` and ``prev2`` with their ``margins``);
+    ``roles``: role -> buffer -> ``(N, C, H, W)`` float16 or float32 as read (``prev`` and ``prev2`` with their
+    ``margins``);
     ``ranges``: role -> ``(N, 2)`` depth ranges of each sample's whole frame; ``sampled``: LR role -> buffers to
     point-sample from its HR role. Moves to a device with :meth:`to` (Lightning calls it) and pins with
     :meth:`pin_memory` (the DataLoader does).
@@ -122,7 +123,10 @@ class RawBatch:
     def build(self) -> dict:
         """The named batch tensors (keys documented in :mod:`wdss.data.datamodule`), on the raw batch's device."""
         prep = self.prep
-        roles = {role: clean(buffers, prep, self.ranges.get(role)) for role, buffers in self.roles.items()}
+        roles = {
+            role: clean({k: v.float() for k, v in buffers.items()}, prep, self.ranges.get(role))
+            for role, buffers in self.roles.items()
+        }
         height, width = next(iter(roles["hr"].values())).shape[-2:] if roles["hr"] else (0, 0)
         for low, high in (("lr", "hr"), ("prev_lr", "prev")):  # no native folder: point-sample the HR frame
             if self.sampled.get(low):
