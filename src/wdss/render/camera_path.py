@@ -37,6 +37,7 @@ MAX_SKY_FRAMES = 3  # consecutive frames that may look at (nearly) nothing but s
 MIN_HIT_SHARE = 0.1  # of the view rays that must hit geometry for a frame not to count as sky
 ATTEMPTS = 24  # candidate paths tried before giving up
 EYE_HEIGHT = 1.7  # scene units (metres in glTF): eye height of a fly-through, at most 0.6 x the scene's height
+NO_STANDING_POINT = "no floor with head room found"
 PROCEDURAL_EXTENT = 7.0  # objects of the procedural scenes lie within this radius: the orbit's unit scene
 
 
@@ -263,10 +264,8 @@ def _clear(ray_cast: RayCast, a: np.ndarray, b: np.ndarray, margin: float) -> bo
     return bool((distances > length + margin).all())
 
 
-def fly_path(
-    rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, ray_cast: RayCast, frames: int
-) -> FlyPath | None:
-    """A seeded eye-height walk through free space long enough for ``frames`` frames, or None."""
+def fly_path(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, ray_cast: RayCast, frames: int) -> FlyPath | str:
+    """A seeded eye-height walk through free space long enough for ``frames`` frames, or why there is none."""
     size = hi - lo
     eye = min(EYE_HEIGHT, 0.6 * float(size[2])) if size[2] > 0 else EYE_HEIGHT
     clearance = 0.25 * eye
@@ -274,7 +273,7 @@ def fly_path(
     speed_wobble, wobble_period = float(rng.uniform(0.0, 0.8)), float(rng.uniform(12.0, 40.0))
     lookahead = 3.0 * eye
     start = 2.0 * speed
-    needed = start + speed * (frames + 1) * (1.0 + speed_wobble) + lookahead
+    needed = start + speed * (frames + 1) * (1.0 + speed_wobble)  # beyond its end the curve goes straight on
 
     def free(point: np.ndarray | None) -> bool:
         if point is None:
@@ -293,36 +292,46 @@ def fly_path(
         if first is not None:
             break
     if first is None:
-        return None
+        return f"{NO_STANDING_POINT} for an eye height of {eye:.3g} (64 tries)"
     radius = min(max(needed, 4 * eye), 0.5 * float(np.hypot(size[0], size[1])))
     candidates = []
-    for _ in range(48):
+    for _ in range(64):
         angle, r = rng.uniform(0, 2 * math.pi), radius * math.sqrt(rng.random())
         x, y = np.clip(first[:2] + r * np.array([math.cos(angle), math.sin(angle)]), inner_lo, inner_hi)
         point = standing(float(x), float(y))
         if point is not None:
             candidates.append(point)
-    waypoints, heading, length = [first], None, 0.0
-    while length < needed:
+    budget = [400]  # line-of-sight tests of the depth-first search below
+
+    def extend(waypoints: list[np.ndarray], heading: np.ndarray | None, length: float) -> list[np.ndarray] | None:
+        """Waypoints from ``waypoints`` on, at least ``needed`` long: at most 4 branches per waypoint, turns
+        under 100 degrees; a waypoint may be visited again (loops), but not one of the last two."""
+        if length >= needed:
+            return waypoints
         here = waypoints[-1]
         options = []
         for point in candidates:
             step = point - here
             distance = float(np.linalg.norm(step[:2]))
-            if not 1.5 * eye <= distance <= 6.0 * eye or any(point is w for w in waypoints):
+            if not 1.5 * eye <= distance <= 6.0 * eye or any(point is w for w in waypoints[-2:]):
                 continue
             turn = 0.0 if heading is None else abs(_angle(heading, step[:2]))
-            if turn > math.radians(75):
-                continue
-            options.append((turn + 0.5 * rng.random(), point))
-        for _, point in sorted(options, key=lambda option: option[0]):
+            if turn < math.radians(100):
+                options.append((turn / math.pi + 0.5 * rng.random(), point))
+        for _, point in sorted(options, key=lambda option: option[0])[:4]:
+            if budget[0] <= 0:
+                return None
+            budget[0] -= 1
             if _clear(ray_cast, here, point, clearance):
-                heading = (point - here)[:2]
-                length += float(np.linalg.norm(point - here))
-                waypoints.append(point)
-                break
-        else:
-            return None
+                step = point - here
+                found = extend([*waypoints, point], step[:2], length + float(np.linalg.norm(step)))
+                if found is not None:
+                    return found
+        return None
+
+    waypoints = extend([first], None, 0.0)
+    if waypoints is None:
+        return f"no walk of {needed:.3g} units through free space from {first.round(3).tolist()}"
     return FlyPath(
         waypoints=[p.round(6).tolist() for p in waypoints],
         start=start,
@@ -353,10 +362,13 @@ def fit_camera(
         raise ValueError(f"camera mode must be one of {CAMERA_MODES}, got {mode!r}")
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     rng = np.random.default_rng([seed, 16])
-    reason = "no standing point with head room found"
+    reason = ""
     for attempt in range(ATTEMPTS):
         path = orbit_path(rng, lo, hi) if mode == "orbit" else fly_path(rng, lo, hi, ray_cast, frames)
-        if path is None:
+        if isinstance(path, str):
+            reason = path
+            if reason.startswith(NO_STANDING_POINT):  # the scene has no floor with head room: no retry finds one
+                raise ValueError(f"no {mode} camera path: {reason}")
             continue
         poses = {f: path.pose(f) for f in range(-1, frames + 2)}
         # the curve between waypoints (which keep 2 x 0.25 eye heights from walls) may cut corners a little

@@ -106,19 +106,14 @@ class FileScene:
         where = f"render.scene ({where}): {path}" if where else f"render.scene: {path}"
         bpy.ops.wm.read_factory_settings(use_empty=True)
         bpy.context.preferences.filepaths.use_scripts_auto_execute = False
-        importer_log = logging.getLogger("glTFImporter")  # one INFO line per node otherwise
-        level = importer_log.level
-        importer_log.setLevel(logging.WARNING)
         try:
             with _quiet():
                 if self.kind == "gltf":
-                    bpy.ops.import_scene.gltf(filepath=str(path))
+                    bpy.ops.import_scene.gltf(filepath=str(path), loglevel=logging.WARNING)  # not a line per node
                 else:
                     bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
         except RuntimeError as err:
             raise ValueError(f"{where} could not be read: {str(err).strip()}") from err
-        finally:
-            importer_log.setLevel(level)
         scene = self.scene = bpy.context.scene
         self.offset = self._first_frame()
         scene.frame_set(self.offset)

@@ -1,0 +1,217 @@
+"""Rendering a scene file (slow): a small scene built with bpy and exported to .glb renders with the procedural
+scenes' conventions, from its own animated camera and from a fitted orbit; bad files are refused up front."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+import pytest
+
+from tests.render.conventions import check_conventions, load_sidecar
+from wdss.data import Sequence
+
+pytest.importorskip("bpy", reason="needs the render extra: make setup-render")
+pytestmark = pytest.mark.slow
+
+from wdss.render.sequence import render_sequence  # noqa: E402
+
+SIZE = (48, 32)
+SETTINGS = dict(frames=2, resolution=SIZE, scales=(2,), samples=2, denoise=False)
+# The wall's 2x2 texture (8-bit sRGB), by (row from the bottom, column): v < 0.5 is the lower row.
+BLOCKS = {(0, 0): (200, 40, 30), (0, 1): (30, 160, 60), (1, 0): (40, 60, 200), (1, 1): (220, 200, 40)}
+TILT = math.radians(30)  # the ground's normal map tilts every normal by this angle towards +u (world +x)
+CAMERA = [(-0.5 + 0.3 * f, -6.0, 1.5) for f in range(4)]  # the file camera's keyed positions, frames 0..3
+LAMP = (1.8, 0.0, 0.4)  # centre of the emissive sphere, radius 0.4
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _image(bpy, name: str, folder, texels: dict[tuple[int, int], tuple[int, int, int]], size: int, data: bool):
+    image = bpy.data.images.new(name, size, size, alpha=False)
+    pixels = []
+    for row in range(size):  # Blender's pixel rows go bottom-up, as v does
+        for col in range(size):
+            pixels += [c / 255.0 for c in texels[(row * 2 // size, col * 2 // size)]] + [1.0]
+    image.pixels = pixels
+    image.filepath_raw = str(folder / f"{name}.png")
+    image.file_format = "PNG"
+    image.save()
+    if data:
+        image.colorspace_settings.name = "Non-Color"
+    return image
+
+
+def build_scene(folder, *, camera: bool = True, meshes: bool = True, custom_material: bool = False):
+    """The test scene in a fresh Blender: a textured wall, a normal-mapped ground, an emissive sphere, a point
+    light and a camera keyed on frames 0..3. ``custom_material`` adds a box whose material is a node group."""
+    import bpy
+    from mathutils import Vector
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+
+    def principled(name: str):
+        material = bpy.data.materials.new(name)
+        return material, material.node_tree, material.node_tree.nodes["Principled BSDF"]
+
+    if meshes:
+        wall, nt, bsdf = principled("wall")
+        texture = nt.nodes.new("ShaderNodeTexImage")
+        texture.image = _image(bpy, "blocks", folder, BLOCKS, 2, data=False)
+        texture.interpolation = "Closest"
+        nt.links.new(texture.outputs["Color"], bsdf.inputs["Base Color"])
+        bsdf.inputs["Roughness"].default_value = 0.4
+        bpy.ops.mesh.primitive_plane_add(size=2.0, location=(0.0, 1.0, 1.0), rotation=(math.pi / 2, 0.0, 0.0))
+        bpy.context.object.data.materials.append(wall)
+
+        ground, nt, bsdf = principled("ground")
+        tilted = tuple(round(255 * (0.5 + 0.5 * c)) for c in (math.sin(TILT), 0.0, math.cos(TILT)))
+        normal_texture = nt.nodes.new("ShaderNodeTexImage")
+        normal_texture.image = _image(bpy, "tilt", folder, dict.fromkeys(BLOCKS, tilted), 4, data=True)
+        normal_map = nt.nodes.new("ShaderNodeNormalMap")
+        nt.links.new(normal_texture.outputs["Color"], normal_map.inputs["Color"])
+        nt.links.new(normal_map.outputs["Normal"], bsdf.inputs["Normal"])
+        bsdf.inputs["Base Color"].default_value = (0.5, 0.5, 0.5, 1.0)
+        bsdf.inputs["Roughness"].default_value = 0.6
+        bpy.ops.mesh.primitive_plane_add(size=8.0)
+        bpy.context.object.data.materials.append(ground)
+
+        lamp, _, bsdf = principled("lamp")
+        bsdf.inputs["Base Color"].default_value = (1.0, 0.5, 0.1, 1.0)
+        bsdf.inputs["Emission Color"].default_value = (1.0, 0.5, 0.1, 1.0)
+        bsdf.inputs["Emission Strength"].default_value = 5.0
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.4, location=LAMP)
+        bpy.context.object.data.materials.append(lamp)
+
+    if custom_material:
+        group = bpy.data.node_groups.new("toon", "ShaderNodeTree")
+        group.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+        diffuse = group.nodes.new("ShaderNodeBsdfDiffuse")
+        output = group.nodes.new("NodeGroupOutput")
+        group.links.new(diffuse.outputs["BSDF"], output.inputs[0])
+        toon = bpy.data.materials.new("toon")
+        toon.diffuse_color = (0.2, 0.3, 0.4, 1.0)
+        toon.roughness, toon.metallic = 0.25, 0.5
+        nt = toon.node_tree
+        nt.nodes.remove(nt.nodes["Principled BSDF"])
+        node = nt.nodes.new("ShaderNodeGroup")
+        node.node_tree = group
+        nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+        bpy.ops.mesh.primitive_cube_add(size=0.6, location=(-1.8, 0.0, 0.3))
+        bpy.context.object.name = "box"
+        bpy.context.object.data.materials.append(toon)
+
+    light = bpy.data.objects.new("bulb", bpy.data.lights.new("bulb", "POINT"))
+    light.data.energy = 500.0
+    light.location = (-1.0, -2.0, 3.0)
+    scene.collection.objects.link(light)
+    if camera:
+        data = bpy.data.cameras.new("camera")
+        data.lens = 35.0
+        obj = bpy.data.objects.new("camera", data)
+        scene.collection.objects.link(obj)
+        scene.camera = obj
+        for frame, location in enumerate(CAMERA):
+            obj.location = location
+            obj.rotation_euler = (Vector((0.0, 0.0, 0.8)) - Vector(location)).to_track_quat("-Z", "Y").to_euler()
+            obj.keyframe_insert("location", frame=frame)
+            obj.keyframe_insert("rotation_euler", frame=frame)
+    return bpy
+
+
+def export_glb(folder, name: str = "scene.glb", **kwargs):
+    bpy = build_scene(folder, **kwargs)
+    path = folder / name
+    bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB", export_cameras=True, export_lights=True)
+    return path
+
+
+@pytest.fixture(scope="module")
+def glb(tmp_path_factory):
+    return export_glb(tmp_path_factory.mktemp("scene"))
+
+
+def test_a_glb_renders_from_its_animated_camera_with_the_conventions(glb, tmp_path):
+    folder = render_sequence(tmp_path, "file", 1, scene=str(glb), **SETTINGS)
+    assert Sequence(folder).frames == [0, 1, 2] and Sequence(folder).resolutions == [32, 16]
+    frames = check_conventions(folder)
+    meta, cameras = load_sidecar(folder)
+    scene = meta["scene"]
+    assert scene["camera"] == {"mode": "file", "object": "camera", "moving": True}
+    assert scene["lighting"]["mode"] == "file" and scene["lighting"]["file_lights"] == ["bulb"]
+    assert scene["material_fallbacks"] == [] and meta["settings"]["scene"]["file"] == "scene.glb"
+    for frame in (0, 1, 2):  # frame 0 is the file's first keyed frame
+        np.testing.assert_allclose(cameras[frame][:3, 3], CAMERA[frame], atol=1e-4)
+    blocks = normals = lamp = 0
+    for buffers in frames.values():
+        world, surface, base = buffers["world"], buffers["surface"], buffers["base_color"]
+        # The wall (y = 1): base colour is its texture's texel, linear; u = (x + 1) / 2, v = z / 2. (Away from
+        # texel borders and the wall's own edges, where a pixel's samples may straddle two surfaces.)
+        u, v = (world[..., 0] + 1) / 2, world[..., 2] / 2
+        inner = [(np.abs(t - 0.5) > 0.05) & (t > 0.05) & (t < 0.95) for t in (u, v)]
+        wall = surface & (np.abs(world[..., 1] - 1.0) < 0.01) & inner[0] & inner[1]
+        for (row, col), srgb in BLOCKS.items():
+            texel = wall & ((v >= 0.5) == bool(row)) & ((u >= 0.5) == bool(col))
+            expected = srgb_to_linear(np.array(srgb) / 255.0)
+            np.testing.assert_allclose(base[:, texel].T, np.broadcast_to(expected, (texel.sum(), 3)), atol=2e-3)
+            blocks += texel.sum() > 0
+        # The ground (z = 0): shading normals tilted by the normal map, not the plane's +z.
+        ground = surface & (np.abs(world[..., 2]) < 0.01)
+        expected = [math.sin(TILT), 0.0, math.cos(TILT)]
+        np.testing.assert_allclose(np.median(buffers["normal"][:, ground], axis=1), expected, atol=0.03)
+        normals += ground.sum()
+        # The emissive sphere outshines the lit ground.
+        sphere = surface & (np.abs(np.linalg.norm(world - LAMP, axis=-1) - 0.4) < 0.02)
+        luminance = buffers["color"].astype(np.float64).mean(0)
+        assert np.median(luminance[sphere]) > 3 * np.median(luminance[ground])
+        lamp += sphere.sum()
+    assert blocks == 8 and normals > 200 and lamp > 10
+
+
+def test_a_glb_renders_from_a_fitted_orbit(glb, tmp_path):
+    folder = render_sequence(tmp_path, "orbit", 2, scene=str(glb), camera="orbit", **SETTINGS)
+    frames = check_conventions(folder)
+    meta, cameras = load_sidecar(folder)
+    camera, bounds = meta["scene"]["camera"], np.array(meta["scene"]["bounds"])
+    assert camera["mode"] == "orbit" and camera["path"]["mode"] == "orbit"
+    centre, extent = bounds.mean(0), 0.5 * np.hypot(*(bounds[1] - bounds[0])[:2])
+    for frame, pose in cameras.items():  # outside the scene, looking at it
+        assert np.hypot(*(pose[:3, 3] - centre)[:2]) > extent, frame
+    for buffers in frames.values():
+        assert buffers["surface"].mean() > 0.3
+    # Seeded: the same seed fits the same path.
+    again = render_sequence(tmp_path, "again", 2, scene=str(glb), camera="orbit", **{**SETTINGS, "frames": 1})
+    assert load_sidecar(again)[0]["scene"]["camera"] == camera
+
+
+def test_a_file_without_a_mesh_or_camera_is_refused_before_anything_is_written(tmp_path):
+    empty = export_glb(tmp_path, "lights.glb", meshes=False)
+    with pytest.raises(ValueError, match=r"render\.scene \(sequence 'a'\): .*lights\.glb has no mesh"):
+        render_sequence(tmp_path / "out", "a", 0, scene=str(empty), **SETTINGS)
+    still = export_glb(tmp_path, "still.glb", camera=False)
+    with pytest.raises(ValueError, match=r"still\.glb has no camera \(render\.camera=file\)"):
+        render_sequence(tmp_path / "out", "b", 0, scene=str(still), camera="file", **SETTINGS)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_blend_file_names_the_materials_it_cannot_read_and_records_their_fallbacks(tmp_path, caplog):
+    from wdss.render.scene_file import FileScene
+
+    bpy = build_scene(tmp_path, custom_material=True)
+    path = tmp_path / "scene.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    with caplog.at_level(logging.WARNING):
+        scene = FileScene(path, seed=0, frames=2, resolution=SIZE, where="sequence 'a'")
+    assert scene.description["camera"]["mode"] == "file"  # auto: the file's camera moves
+    [fallback] = scene.description["material_fallbacks"]
+    assert fallback["material"] == "toon" and fallback["objects"] == ["box"]
+    assert "node group 'toon'" in fallback["reason"]
+    assert fallback["base_color"] == pytest.approx([0.2, 0.3, 0.4]) and fallback["roughness"] == pytest.approx(0.25)
+    assert any("'toon'" in r.message and "box" in r.message for r in caplog.records if r.levelno == logging.WARNING)
+    aovs = {n.aov_name: n for n in bpy.data.materials["toon"].node_tree.nodes if n.type == "OUTPUT_AOV"}
+    assert tuple(aovs["basecolor"].inputs["Color"].default_value)[:3] == pytest.approx((0.2, 0.3, 0.4))
+    assert aovs["metallic"].inputs["Value"].default_value == pytest.approx(0.5)
