@@ -1,0 +1,206 @@
+"""Packed stores: the same batches as the EXR files, in either preprocessing placement; corrupt, interrupted, stale and
+non-finite stores give clear errors or resume."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from wdss.data import BATCH_KEYS, SceneDataModule, SceneError, Sequence
+from wdss.data import pack as pack_module
+from wdss.data.dataset import Collate, FrameDataset, Preprocessing, _mix
+from wdss.data.exr import read_exr, write_exr
+from wdss.data.pack import main as pack_main
+from wdss.data.pack import pack, pack_sequence, verify_sequence
+from wdss.data.packed import PackedSequence
+from wdss.data.preprocess import RawBatch
+from wdss.data.synthetic import write_sequence
+
+FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "rendered"
+SPLITS = {"train": ["fixture_000"], "val": ["fixture_000"], "test": ["fixture_000"]}
+
+
+@pytest.fixture(scope="module", params=[("zstd", 16), ("none", 0)], ids=["zstd-tiles", "none-whole"])
+def store(request, tmp_path_factory) -> Path:
+    codec, tile = request.param
+    out = tmp_path_factory.mktemp("packed") / "rendered.packed"
+    pack(FIXTURES, out, codec=codec, tile=tile, verify=None)  # every frame compared bit for bit with its EXR
+    return out
+
+
+def batches(store: Path | None, placement: str, **kwargs) -> tuple[dict, dict]:
+    """The first training batch (patches, flips, a scale range) and the first test batch, read from the EXR files
+    (``store`` None) or the packed store, preprocessed in the loader or on the device (the DataModule's hook)."""
+    options = dict(patch_size=24, batch_size=2, scale=[2, 4], flips=True, test_scales=[2.0]) | kwargs
+    dm = SceneDataModule(
+        FIXTURES,
+        SPLITS,
+        BATCH_KEYS,
+        format="exr" if store is None else "packed",
+        packed_root=store,
+        preprocess_on=placement,
+        **options,
+    )
+    dm.setup()
+    kind = Sequence if store is None else PackedSequence
+    assert all(isinstance(s, kind) for s in dm.datasets["train"].sequences)
+    out = []
+    for loader in (dm.train_dataloader(), dm.test_dataloader()[0]):
+        batch = next(iter(loader))
+        assert isinstance(batch, RawBatch) == (placement == "device")
+        out.append(dm.on_after_batch_transfer(batch, 0))
+    return out[0], out[1]
+
+
+def assert_same(batch: dict, expected: dict) -> None:
+    assert set(batch) == set(expected)
+    for key in BATCH_KEYS:
+        assert batch[key].dtype == torch.float32, key
+        torch.testing.assert_close(batch[key], expected[key], rtol=0, atol=1e-6, msg=key)
+    assert batch["sequence"] == expected["sequence"] and torch.equal(batch["frame"], expected["frame"])
+    assert torch.equal(batch["scale"], expected["scale"])
+
+
+def test_packed_batches_are_the_exr_batches_in_either_placement(store):
+    """Packed or EXR, preprocessed in the loader or on the device: one batch (patches, history, masks, scales)."""
+    train, test = batches(None, "loader")
+    assert float(train["history"].abs().sum()) > 0 and 0 < float(train["spatial_mask"].mean()) < 1
+    for source, placement in ((None, "device"), (store, "loader"), (store, "device")):
+        other_train, other_test = batches(source, placement)
+        assert_same(other_train, train)
+        assert_same(other_test, test)
+
+
+def test_sequences_of_steps_are_built_on_the_device_alike(store):
+    keys = ["lr", "history", "temporal_mask", "target", "brdf", "motion"]
+    built = []
+    for source, placement in ((None, "loader"), (store, "device")):
+        dm = SceneDataModule(
+            FIXTURES, SPLITS, keys, format="exr" if source is None else "packed", packed_root=source,
+            preprocess_on=placement, patch_size=24, batch_size=1, sequence_length=2, scale=2.0,
+        )  # fmt: skip
+        dm.setup("fit")
+        built.append(dm.on_after_batch_transfer(next(iter(dm.train_dataloader())), 0))
+    for step, expected in zip(built[1]["steps"], built[0]["steps"], strict=True):
+        for key in keys:
+            torch.testing.assert_close(step[key], expected[key], rtol=0, atol=1e-6)
+
+
+def test_a_patch_reads_only_its_tiles_and_history_from_outside_the_patch_is_kept(tmp_path):
+    """The previous frame is read with the margin the motion needs: the warped history of a translating scene is
+    the current irradiance up to the patch's border (zeros only where it came from outside the frame)."""
+    path = write_sequence(tmp_path / "seq", frames=(1, 2), size=(40, 48), scales=(2,), motion=(3.0, -2.0))
+    packed = pack_sequence(Sequence(path), tmp_path / "packed" / "seq", tile=8, verify=0)
+    decoded = []
+    original = packed._decode
+    packed._decode = lambda data, size: decoded.append(size) or original(data, size)
+    window, _ = packed.read_window(2, 40, ["color"], (8, 16, 8, 8))
+    assert len(decoded) == 1  # one 8x8 tile: an aligned patch decodes nothing else
+    np.testing.assert_array_equal(window["color"], Sequence(path).read(2, 40, ["color"])["color"][:, 8:16, 16:24])
+    keys = ["history", "temporal_mask", "target", "brdf"]
+    collate = Collate(keys, Preprocessing(), 2.0)
+    full = collate([FrameDataset([packed], keys, scale=2.0)[0]])
+    dataset = FrameDataset([packed], keys, scale=2.0, patch=16)
+    for epoch in range(6):
+        sample = dataset[(0, epoch)]
+        assert sample["margins"]["prev"] == 4  # |motion| 3, plus one for the bilinear taps
+        assert sample["prev"]["color"].shape[-2:] == (24, 24)
+        (y, x, size, _), _ = dataset._window(packed, None, torch.Generator().manual_seed(_mix(0, epoch, 0)))
+        patch = collate([sample])
+        for key in ("history", "temporal_mask"):  # the whole frame's, cut: not zeros at the patch's border
+            torch.testing.assert_close(patch[key], full[key][..., y : y + size, x : x + size], rtol=1e-5, atol=1e-5)
+
+
+def test_a_corrupt_store_names_the_file_and_the_sequence(tmp_path):
+    path = write_sequence(tmp_path / "seq", frames=(1, 2), size=(16, 24), scales=(2,))
+    folder = tmp_path / "packed" / "seq"
+    pack_sequence(Sequence(path), folder, tile=8, verify=0)
+    hr = folder / "16P.bin"
+    data = bytearray(hr.read_bytes())
+    # A flipped byte inside a chunk: its checksum fails when that tile is read.
+    index = json.loads((folder / "index.json").read_text())
+    record = index["resolutions"]["16"]["packed"]["2"]
+    data[record["offset"] + record["length"] - 8] ^= 0xFF
+    hr.write_bytes(bytes(data))
+    with pytest.raises(SceneError, match=rf"packed file {hr} of sequence 'seq' is corrupt: frame 2, buffer motion"):
+        PackedSequence(folder).read_window(2, 16, ["motion"], None)
+    # A truncated file: refused when the sequence is opened.
+    hr.write_bytes(bytes(data[:-100]))
+    with pytest.raises(SceneError, match=rf"packed file {hr} of sequence 'seq' \(16P\) is .* truncated or corrupt"):
+        PackedSequence(folder)
+    (folder / "index.json").write_text("{not json")
+    with pytest.raises(SceneError, match=r"packed index .*index.json cannot be read"):
+        PackedSequence(folder)
+    with pytest.raises(SceneError, match=r"sequence 'other' is not packed in .*wdss.data.pack"):
+        SceneDataModule(tmp_path, {"train": ["other"]}, ["target"], format="packed", packed_root=tmp_path).setup("fit")
+
+
+def test_an_interrupted_pack_resumes_where_it_stopped(tmp_path, monkeypatch):
+    path = write_sequence(tmp_path / "seq", frames=(1, 2, 3, 4), size=(16, 24), scales=(2,))
+    folder = tmp_path / "packed" / "seq"
+    encoded = []
+    original = pack_module._encode
+
+    def killed_at_the_third_frame(*args, **kwargs):
+        if len(encoded) == 2:
+            with open(folder / "16P.bin", "ab") as out:
+                out.write(b"half a record")  # what a kill leaves behind
+            raise KeyboardInterrupt
+        encoded.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(pack_module, "SAVE_EVERY_S", 0.0)
+    monkeypatch.setattr(pack_module, "_encode", killed_at_the_third_frame)
+    with pytest.raises(KeyboardInterrupt):
+        pack_sequence(Sequence(path), folder, verify=0)
+    with pytest.raises(
+        SceneError, match=r"packed sequence 'seq' .* is incomplete .* run python -m wdss.data.pack again"
+    ):
+        PackedSequence(folder)
+    monkeypatch.setattr(pack_module, "_encode", lambda *a, **k: encoded.append(1) or original(*a, **k))
+    packed = pack_sequence(Sequence(path), folder, verify=None)  # every frame compared with its EXR
+    assert len(encoded) == 2 + 6  # two HR frames kept; two more and four at 8P packed on resuming
+    assert packed.frames == [1, 2, 3, 4] and verify_sequence(Sequence(path), packed, None) == 8
+    with pytest.raises(SceneError, match="other settings"):
+        pack_sequence(Sequence(path), folder, codec="none")
+
+
+def test_a_stale_store_is_refused_when_packed_and_passed_over_when_auto(tmp_path, caplog):
+    root = tmp_path / "scenes"
+    path = write_sequence(root / "seq", frames=(1, 2), size=(16, 24), scales=(2,))
+    pack(root, verify=0)
+    keys = ["lr", "target", "brdf"]
+    auto = SceneDataModule(root, {"train": ["seq"]}, keys, patch_size=8)
+    auto.setup("fit")
+    assert isinstance(auto.datasets["train"].sequences[0], PackedSequence)
+    write_exr(path / "16P" / "PretonemapMetallic.0002.exr", {c: np.ones((16, 24), np.float32) for c in "RGBA"})
+    with pytest.raises(SceneError, match=r"packed sequence 'seq' .* is out of date: .*PretonemapMetallic.0002.exr"):
+        SceneDataModule(root, {"train": ["seq"]}, keys, patch_size=8, format="packed").setup("fit")
+    auto = SceneDataModule(root, {"train": ["seq"]}, keys, patch_size=8)
+    auto.setup("fit")
+    assert isinstance(auto.datasets["train"].sequences[0], Sequence)
+    assert "reading seq from EXR files, not its packed copy" in caplog.text
+
+
+def test_non_finite_values_fail_unless_sanitized_and_inputs_pack_only_their_buffers(tmp_path):
+    path = write_sequence(tmp_path / "scenes" / "seq", frames=(1, 2), size=(16, 24), scales=(2,))
+    name = path / "16P" / "BaseColorDepth.0002.exr"
+    planes = read_exr(name)
+    planes["A"][3, 4] = np.nan
+    write_exr(name, planes)
+    pack_main([f"root={tmp_path / 'scenes'}", "inputs=lr,target", "verify=all"])
+    packed = PackedSequence(tmp_path / "scenes.packed" / "seq")
+    # A bare model with demodulation reads colour and the BRDF's buffers: no depth, normal or motion.
+    assert sorted(packed._res[16]["buffers"]) == ["base_color", "color", "metallic", "specular"]
+    shutil.rmtree(tmp_path / "scenes.packed")
+    pack(tmp_path / "scenes", verify=0)
+    packed = PackedSequence(tmp_path / "scenes.packed" / "seq")
+    with pytest.raises(SceneError, match=r"sequence 'seq', frame 2, buffer depth .* 1 non-finite value"):
+        packed.read_window(2, 16, ["depth"], (0, 0, 8, 8))
+    window, _ = packed.read_window(2, 16, ["depth"], (0, 0, 8, 8), sanitize=True)
+    assert np.isfinite(window["depth"]).all() and packed.sanitized == {"16P:2:depth": 1}
