@@ -61,6 +61,8 @@ def test_an_orbit_circles_outside_the_scene_looking_at_it():
         forward = -pose[:3, 2]
         assert np.dot(forward[:2], -pose[:2, 3]) > 0
     assert path.to_dict()["mode"] == "orbit"
+    with pytest.raises(ValueError, match="sees mostly back faces"):  # a closed room is not for orbits
+        fit_camera("orbit", 0, *ROOM.bounds(), ROOM, frames=30, aspect=1.5)
 
 
 def test_cameras_inside_geometry_through_walls_or_at_the_sky_are_refused():

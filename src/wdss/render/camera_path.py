@@ -14,7 +14,8 @@ world space), so the paths are tested here against analytic scenes and fitted in
 Every candidate path is checked frame by frame (:func:`check_poses`): the camera is never inside geometry
 (most rays from it hit back faces) nor within ``clearance`` of a surface, never passes through a surface
 between two frames, and never looks at empty sky (fewer than :data:`MIN_HIT_SHARE` of a grid of view rays hit
-geometry) for more than :data:`MAX_SKY_FRAMES` frames in a row. :func:`fit_camera` tries seeded candidates
+geometry) or at mostly back faces (a closed room's walls from outside) for more than :data:`MAX_SKY_FRAMES`
+frames in a row. :func:`fit_camera` tries seeded candidates
 until one passes.
 """
 
@@ -185,7 +186,7 @@ def check_poses(
 ) -> str | None:
     """Why the camera at ``poses`` (frame -> camera-to-world) is unusable, or None when it is fine."""
     frames = sorted(poses)
-    sky_run = 0
+    sky_run = back_run = 0
     for index, frame in enumerate(frames):
         eye = poses[frame][:3, 3]
         inside, nearest = inside_geometry(ray_cast, frame, eye)
@@ -201,10 +202,18 @@ def check_poses(
                 if distance[0] < length:
                     return f"the camera passes through a surface between frames {frames[index - 1]} and {frame}"
         rays = _view_rays(poses[frame], lens, aspect)
-        distances, _ = ray_cast(frame, np.repeat(eye[None], len(rays), 0), rays)
-        sky_run = sky_run + 1 if np.isfinite(distances).mean() < MIN_HIT_SHARE else 0
+        distances, normals = ray_cast(frame, np.repeat(eye[None], len(rays), 0), rays)
+        hit = np.isfinite(distances)
+        sky_run = sky_run + 1 if hit.mean() < MIN_HIT_SHARE else 0
         if sky_run > MAX_SKY_FRAMES:
             return f"the camera looks at empty sky for more than {MAX_SKY_FRAMES} frames (frames up to {frame})"
+        back = ((normals * rays).sum(-1) > 0.0)[hit]
+        back_run = back_run + 1 if back.size and back.mean() > 0.5 else 0
+        if back_run > MAX_SKY_FRAMES:
+            return (
+                f"the camera sees mostly back faces (e.g. a room's walls from outside) for more than "
+                f"{MAX_SKY_FRAMES} frames (frames up to {frame})"
+            )
     return None
 
 

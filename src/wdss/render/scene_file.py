@@ -262,7 +262,8 @@ class FileScene:
         try:
             path, poses, attempt = fit_camera(mode, seed, lo, hi, self._ray_caster(), frames, width / height)
         except ValueError as err:
-            raise ValueError(f"{where}: render.camera={mode}: {err}") from err
+            hint = "camera=fly walks through interiors" if mode == "orbit" else "camera=orbit circles the scene"
+            raise ValueError(f"{where}: render.camera={mode}: {err}; {hint}") from err
         data.lens = self.lens = path.lens
         for f, pose in poses.items():
             obj.matrix_world = Matrix(pose.tolist())
