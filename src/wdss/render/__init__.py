@@ -1,4 +1,5 @@
-"""Procedural datasets rendered with Blender Cycles (``bpy``, the ``render`` extra), in the authors' layout.
+"""Datasets rendered with Blender Cycles (``bpy``, the ``render`` extra), in the authors' layout, from procedural
+scenes (:mod:`wdss.render.spec`) or scene files (``.glb``/``.gltf``/``.blend``, :mod:`wdss.render.scene_file`).
 
 ``python -m wdss.render`` (config ``conf/render/``) renders sequences; :func:`render_preset` renders a named
 preset, which is how ``conf/data/mini.yaml`` makes the default dataset on first use.

@@ -1,10 +1,11 @@
-"""``python -m wdss.render``: render procedural sequences with Blender Cycles (config: ``conf/render/``).
+"""``python -m wdss.render``: render sequences with Blender Cycles (config: ``conf/render/``).
 
 Examples::
 
     python -m wdss.render                                   # conf/render/default.yaml
     python -m wdss.render -cn mini                          # the default training dataset (data/mini)
     python -m wdss.render out_dir=data/city 'sequences=[{name: a, seed: 7}]' frames=60 preview=true
+    python -m wdss.render out_dir=data/house scene=assets/house.glb camera=fly 'sequences=[{name: a, seed: 1}]'
 """
 
 from __future__ import annotations
