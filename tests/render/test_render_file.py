@@ -45,7 +45,7 @@ def _image(bpy, name: str, folder, texels: dict[tuple[int, int], tuple[int, int,
     return image
 
 
-def build_scene(folder, *, camera: bool = True, meshes: bool = True, custom_material: bool = False):
+def build_scene(folder, *, camera: bool = True, meshes: bool = True, light: bool = True, custom_material: bool = False):
     """The test scene in a fresh Blender: a textured wall, a normal-mapped ground, an emissive sphere, a point
     light and a camera keyed on frames 0..3. ``custom_material`` adds a box whose material is a node group."""
     import bpy
@@ -105,10 +105,11 @@ def build_scene(folder, *, camera: bool = True, meshes: bool = True, custom_mate
         bpy.context.object.name = "box"
         bpy.context.object.data.materials.append(toon)
 
-    light = bpy.data.objects.new("bulb", bpy.data.lights.new("bulb", "POINT"))
-    light.data.energy = 500.0
-    light.location = (-1.0, -2.0, 3.0)
-    scene.collection.objects.link(light)
+    if light:
+        bulb = bpy.data.objects.new("bulb", bpy.data.lights.new("bulb", "POINT"))
+        bulb.data.energy = 500.0
+        bulb.location = (-1.0, -2.0, 3.0)
+        scene.collection.objects.link(bulb)
     if camera:
         data = bpy.data.cameras.new("camera")
         data.lens = 35.0
@@ -188,6 +189,22 @@ def test_a_glb_renders_from_a_fitted_orbit(glb, tmp_path):
     assert load_sidecar(again)[0]["scene"]["camera"] == camera
 
 
+def test_a_file_scene_resumes_and_refuses_a_changed_file(glb, tmp_path):
+    copy = tmp_path / "copy.glb"
+    copy.write_bytes(glb.read_bytes())
+    folder = render_sequence(tmp_path, "seq", 2, scene=str(copy), camera="orbit", **SETTINGS)
+    files = sorted(folder.rglob("*.exr"))
+    stamps = {p: p.stat().st_mtime_ns for p in files}
+    victim = folder / "16P" / "NormalSpecular.0001.exr"  # as if the render died while writing frame 1
+    victim.unlink()
+    render_sequence(tmp_path, "seq", 2, scene=str(copy), camera="orbit", **SETTINGS)
+    changed = {p for p in files if p.stat().st_mtime_ns != stamps[p]}
+    assert victim.exists() and changed and all(".0001." in p.name for p in changed)
+    copy.write_bytes(glb.read_bytes() + b"\0" * 4)  # another scene under the same name
+    with pytest.raises(ValueError, match="rendered with other settings"):
+        render_sequence(tmp_path, "seq", 2, scene=str(copy), camera="orbit", **SETTINGS)
+
+
 def test_a_file_without_a_mesh_or_camera_is_refused_before_anything_is_written(tmp_path):
     empty = export_glb(tmp_path, "lights.glb", meshes=False)
     with pytest.raises(ValueError, match=r"render\.scene \(sequence 'a'\): .*lights\.glb has no mesh"):
@@ -215,3 +232,24 @@ def test_a_blend_file_names_the_materials_it_cannot_read_and_records_their_fallb
     aovs = {n.aov_name: n for n in bpy.data.materials["toon"].node_tree.nodes if n.type == "OUTPUT_AOV"}
     assert tuple(aovs["basecolor"].inputs["Color"].default_value)[:3] == pytest.approx((0.2, 0.3, 0.4))
     assert aovs["metallic"].inputs["Value"].default_value == pytest.approx(0.5)
+
+
+def test_a_file_without_lights_gets_an_hdri_and_a_sun(tmp_path):
+    import bpy
+
+    from wdss.render.scene_file import FileScene
+    from wdss.render.spec import HDRIS
+
+    path = export_glb(tmp_path, "dark.glb", light=False)
+    lighting = FileScene(path, seed=5, frames=2, resolution=SIZE).description["lighting"]
+    assert lighting["mode"] == "hdri" and lighting["hdri"] in HDRIS and lighting["file_lights"] == []
+    assert [o.name for o in bpy.context.scene.objects if o.type == "LIGHT"] == ["sun"]
+    again = FileScene(path, seed=5, frames=2, resolution=SIZE).description["lighting"]
+    assert again == lighting  # seeded
+    assert (
+        FileScene(glb_path := export_glb(tmp_path), seed=5, frames=2, resolution=SIZE, lighting="hdri").description[
+            "lighting"
+        ]["file_lights"]
+        == ["bulb"]
+        and glb_path.exists()
+    )
