@@ -249,3 +249,53 @@ def test_a_file_without_lights_gets_an_hdri_and_a_sun(tmp_path):
     lit = export_glb(tmp_path, "lit.glb")
     added = FileScene(lit, seed=5, frames=2, resolution=SIZE, lighting="hdri").description["lighting"]
     assert added["mode"] == "hdri" and added["file_lights"] == ["bulb"]  # beside the file's own light
+
+
+@pytest.mark.parametrize("cutout", ["principled_alpha", "mix_transparent"])
+def test_g_buffers_see_through_the_cut_out_parts_of_a_material(cutout):
+    """Foliage and fences: where a surface is see-through, depth, normals and AOVs all come from behind it."""
+    import bpy
+
+    from wdss.render.blender import configure_cycles, render_passes
+    from wdss.render.materials import wire_aovs
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    configure_cycles(scene, scene.view_layers[0], seed=0)
+
+    def plane(z: float, color: tuple[float, float, float]):
+        bpy.ops.mesh.primitive_plane_add(size=10.0, location=(0.0, 0.0, z))
+        material = bpy.data.materials.new(f"plane_{z}")
+        bpy.context.object.data.materials.append(material)
+        nt = material.node_tree
+        bsdf = nt.nodes["Principled BSDF"]
+        bsdf.inputs["Base Color"].default_value = (*color, 1.0)
+        return nt, bsdf
+
+    plane(0.0, (0.2, 0.8, 0.2))
+    nt, bsdf = plane(1.0, (0.9, 0.1, 0.1))  # a leaf covering the view, see-through on the left half
+    coords, separate = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeSeparateXYZ")
+    step = nt.nodes.new("ShaderNodeMath")
+    step.operation = "GREATER_THAN"
+    nt.links.new(coords.outputs["Object"], separate.inputs[0])
+    nt.links.new(separate.outputs["X"], step.inputs[0])
+    step.inputs[1].default_value = 0.0
+    if cutout == "principled_alpha":
+        nt.links.new(step.outputs[0], bsdf.inputs["Alpha"])
+    else:
+        mix, transparent = nt.nodes.new("ShaderNodeMixShader"), nt.nodes.new("ShaderNodeBsdfTransparent")
+        nt.links.new(step.outputs[0], mix.inputs[0])
+        nt.links.new(transparent.outputs[0], mix.inputs[1])
+        nt.links.new(bsdf.outputs[0], mix.inputs[2])
+        nt.links.new(mix.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    assert wire_aovs(scene.objects) == []
+    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    scene.collection.objects.link(camera)
+    scene.camera, camera.location = camera, (0.0, 0.0, 5.0)
+    passes = render_passes(scene, 16, 8, samples=2, denoise=False, filter_width=0.01)
+    depth, base = passes["Depth"][0], passes["basecolor"][:3]
+    left, right = np.s_[:, :7], np.s_[:, 9:]  # away from the cut at x = 0
+    np.testing.assert_allclose(depth[left], 5.0, atol=1e-4)  # the ground, through the leaf
+    np.testing.assert_allclose(depth[right], 4.0, atol=1e-4)  # the leaf
+    np.testing.assert_allclose(base[(slice(None), *left)].reshape(3, -1).T, [[0.2, 0.8, 0.2]] * 56, atol=1e-4)
+    np.testing.assert_allclose(base[(slice(None), *right)].reshape(3, -1).T, [[0.9, 0.1, 0.1]] * 56, atol=1e-4)

@@ -8,6 +8,8 @@ the sources are found by walking back from its active Material Output's Surface 
   input's own value); image textures, normal maps and emission stay as the file made them;
 * a Mix Shader: the two branches' sources mixed by the shader's own factor (one branch when only one resolves,
   e.g. a Transparent BSDF mixed with a Principled one);
+* cut-outs (a Principled BSDF's Alpha, or a Transparent BSDF in a Mix Shader): where alpha is under the view
+  layer's pass alpha threshold the AOVs write nothing, as depth and normals then come from the surface behind;
 * an Add Shader: its first branch that resolves; a Reroute: what feeds it.
 
 Anything else (a custom node group, a Diffuse or Emission shader alone, a material without nodes) is *not
@@ -41,7 +43,19 @@ _CHANNELS = (
 Source = Any
 
 
-def _sources(nt, socket, depth: int = 0) -> dict[str, Source] | None:
+def _input(socket) -> Source:
+    """What feeds an input socket: the linked output socket, else its own value."""
+    if socket.is_linked and socket.links[0].is_valid and not socket.links[0].is_muted:
+        return socket.links[0].from_socket
+    value = socket.default_value
+    return tuple(value) if hasattr(value, "__len__") else float(value)
+
+
+def _linked_type(socket) -> str | None:
+    return socket.links[0].from_node.type if socket.is_linked and socket.links[0].is_valid else None
+
+
+def _sources(nt, socket, threshold: float, depth: int = 0) -> dict[str, Source] | None:
     """The sources of each AOV behind shader input ``socket``, or None when no Principled BSDF is reachable."""
     if not socket.is_linked or depth > 32:
         return None
@@ -52,31 +66,58 @@ def _sources(nt, socket, depth: int = 0) -> dict[str, Source] | None:
     if node.mute:
         return None
     if node.type == "REROUTE":
-        return _sources(nt, node.inputs[0], depth + 1)
+        return _sources(nt, node.inputs[0], threshold, depth + 1)
     if node.type == "BSDF_PRINCIPLED":
-        out = {}
-        for aov, name, _ in _CHANNELS:
-            source = node.inputs[name]
-            if source.is_linked and source.links[0].is_valid and not source.links[0].is_muted:
-                out[aov] = source.links[0].from_socket
-            else:
-                value = source.default_value
-                out[aov] = tuple(value) if aov == "basecolor" else float(value)
-        return out
+        out = {aov: _input(node.inputs[name]) for aov, name, _ in _CHANNELS}
+        alpha = _input(node.inputs["Alpha"])
+        return out if isinstance(alpha, float) and alpha >= 1.0 else _gate(nt, out, alpha, threshold)
     if node.type == "ADD_SHADER":
         for branch in (node.inputs[0], node.inputs[1]):
-            found = _sources(nt, branch, depth + 1)
+            found = _sources(nt, branch, threshold, depth + 1)
             if found is not None:
                 return found
         return None
     if node.type == "MIX_SHADER":
-        a, b = _sources(nt, node.inputs[1], depth + 1), _sources(nt, node.inputs[2], depth + 1)
-        if a is None or b is None:
-            return a or b
-        factor = node.inputs[0]
-        factor = factor.links[0].from_socket if factor.is_linked else float(factor.default_value)
-        return {aov: _mix(nt, factor, a[aov], b[aov], aov == "basecolor") for aov, _, _ in _CHANNELS}
+        factor = _input(node.inputs[0])
+        a, b = _sources(nt, node.inputs[1], threshold, depth + 1), _sources(nt, node.inputs[2], threshold, depth + 1)
+        if a is not None and b is not None:
+            return {aov: _mix(nt, factor, a[aov], b[aov], aov == "basecolor") for aov, _, _ in _CHANNELS}
+        # A cut-out: a Transparent BSDF mixed with the surface, whose alpha is then the mix's weight of it.
+        if b is not None and _linked_type(node.inputs[1]) == "BSDF_TRANSPARENT":
+            return _gate(nt, b, factor, threshold)
+        if a is not None and _linked_type(node.inputs[2]) == "BSDF_TRANSPARENT":
+            return _gate(nt, a, _one_minus(nt, factor), threshold)
+        return a or b
     return None
+
+
+def _one_minus(nt, value: Source) -> Source:
+    if isinstance(value, float):
+        return 1.0 - value
+    node = nt.nodes.new("ShaderNodeMath")
+    node.operation = "SUBTRACT"
+    node.inputs[0].default_value = 1.0
+    nt.links.new(value, node.inputs[1])
+    return node.outputs[0]
+
+
+def _gate(nt, sources: dict[str, Source], alpha: Source, threshold: float) -> dict[str, Source]:
+    """``sources`` where ``alpha`` reaches the view layer's pass alpha threshold, else 0.
+
+    Cycles writes the AOVs of every surface a camera ray meets until one is opaque enough (alpha at least the
+    threshold) and adds them up; depth and normals come from that one surface. A see-through part of a cut-out
+    (foliage, fences) must therefore write nothing, so that the surface behind it alone writes its AOVs.
+    """
+    if isinstance(alpha, float):
+        gate: Source = 1.0 if alpha >= threshold else 0.0
+    else:
+        node = nt.nodes.new("ShaderNodeMath")
+        node.operation = "GREATER_THAN"
+        nt.links.new(alpha, node.inputs[0])
+        node.inputs[1].default_value = threshold - 1e-6  # at least the threshold
+        gate = node.outputs[0]
+    zero = {"basecolor": (0.0, 0.0, 0.0, 1.0), "roughness": 0.0, "metallic": 0.0}
+    return {aov: _mix(nt, gate, zero[aov], sources[aov], aov == "basecolor") for aov, _, _ in _CHANNELS}
 
 
 def _mix(nt, factor: Source, a: Source, b: Source, color: bool) -> Source:
@@ -127,10 +168,11 @@ def _default_material():
     return material
 
 
-def wire_aovs(objects: Iterable[Any]) -> list[dict[str, Any]]:
+def wire_aovs(objects: Iterable[Any], *, alpha_threshold: float = 0.5) -> list[dict[str, Any]]:
     """Wire the AOVs of every material of ``objects``; the materials that got fallbacks, one record each:
     ``{"material", "objects", "reason", "base_color", "roughness", "metallic"}`` (``material`` None for objects
-    that had none and got :data:`DEFAULT_MATERIAL`)."""
+    that had none and got :data:`DEFAULT_MATERIAL`). ``alpha_threshold``: the view layer's
+    ``pass_alpha_threshold`` (see :func:`_gate`)."""
     users: dict[Any, list[str]] = {}
     bare: list[str] = []
     for obj in objects:
@@ -156,7 +198,7 @@ def wire_aovs(objects: Iterable[Any]) -> list[dict[str, Any]]:
     for material, names in sorted(users.items(), key=lambda item: item[0].name):
         nt = material.node_tree
         output = nt.get_output_node("CYCLES") if nt is not None else None
-        sources = _sources(nt, output.inputs["Surface"]) if output is not None else None
+        sources = _sources(nt, output.inputs["Surface"], alpha_threshold) if output is not None else None
         if sources is not None:
             _add_aovs(nt, sources)
             continue

@@ -130,7 +130,7 @@ class FileScene:
         render.use_compositing = render.use_sequencer = render.use_border = False
         render.pixel_aspect_x = render.pixel_aspect_y = 1.0
         scene.cycles.film_exposure = 1.0  # radiance in scene units: the sequence's exposure is calibrated later
-        materials = wire_aovs(scene.objects)
+        materials = wire_aovs(scene.objects, alpha_threshold=layer.pass_alpha_threshold)
         lights = self._light(lighting, seed)
         width, height = resolution
         render.resolution_x, render.resolution_y, render.resolution_percentage = width, height, 100
