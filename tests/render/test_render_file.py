@@ -212,6 +212,10 @@ def test_a_file_without_a_mesh_or_camera_is_refused_before_anything_is_written(t
     still = export_glb(tmp_path, "still.glb", camera=False)
     with pytest.raises(ValueError, match=r"still\.glb has no camera \(render\.camera=file\)"):
         render_sequence(tmp_path / "out", "b", 0, scene=str(still), camera="file", **SETTINGS)
+    broken = tmp_path / "broken.glb"
+    broken.write_bytes(b"glTF" + bytes(20))
+    with pytest.raises(ValueError, match=r"render\.scene \(sequence 'c'\): .*broken\.glb could not be read"):
+        render_sequence(tmp_path / "out", "c", 0, scene=str(broken), **SETTINGS)
     assert not (tmp_path / "out").exists()
 
 

@@ -59,7 +59,8 @@ def check_scene(scene: str | Path | None, camera: str, lighting: str, *, where: 
 
 
 def file_digest(path: Path) -> str:
-    """SHA-256 of the file (a resumed render refuses a changed scene)."""
+    """SHA-256 of the file itself, not of a ``.gltf``'s external buffers and images (a resumed render refuses a
+    changed scene)."""
     digest = hashlib.sha256()
     with open(path, "rb") as handle:
         for block in iter(lambda: handle.read(1 << 20), b""):
@@ -99,7 +100,7 @@ class FileScene:
         import bpy
 
         from wdss.render.blender import _quiet, configure_cycles
-        from wdss.render.materials import GEOMETRY_TYPES, wire_aovs
+        from wdss.render.materials import wire_aovs
 
         self.samples, self.denoise, self.filter_width = samples, denoise, filter_width
         self.kind = SCENE_KINDS[path.suffix.lower()]
@@ -115,14 +116,13 @@ class FileScene:
         except RuntimeError as err:
             raise ValueError(f"{where} could not be read: {str(err).strip()}") from err
         scene = self.scene = bpy.context.scene
+        layer = bpy.context.view_layer
         self.offset = self._first_frame()
         scene.frame_set(self.offset)
-        geometry = [o for o in scene.objects if o.type in GEOMETRY_TYPES and not o.hide_render]
-        bounds = self._bounds(geometry)
+        geometry, bounds = self._geometry()
         if bounds is None:
             raise ValueError(f"{where} has no mesh to render")
         lo, hi = bounds
-        layer = bpy.context.view_layer
         for other in scene.view_layers:
             other.use = other == layer
         configure_cycles(scene, layer, seed=seed, threads=threads)
@@ -130,7 +130,7 @@ class FileScene:
         render.use_compositing = render.use_sequencer = render.use_border = False
         render.pixel_aspect_x = render.pixel_aspect_y = 1.0
         scene.cycles.film_exposure = 1.0  # radiance in scene units: the sequence's exposure is calibrated later
-        materials = wire_aovs(scene.objects, alpha_threshold=layer.pass_alpha_threshold)
+        materials = wire_aovs(geometry, alpha_threshold=layer.pass_alpha_threshold)
         lights = self._light(lighting, seed)
         width, height = resolution
         render.resolution_x, render.resolution_y, render.resolution_percentage = width, height, 100
@@ -164,31 +164,37 @@ class FileScene:
         return int(np.ceil(max(ends))) if ends else self.offset
 
     @staticmethod
-    def _bounds(objects) -> tuple[np.ndarray, np.ndarray] | None:
+    def _geometry() -> tuple[list[Any], tuple[np.ndarray, np.ndarray] | None]:
+        """The objects with geometry to render (instanced ones included, e.g. linked collections) and the world
+        bounds of all their instances, None without any."""
         import bpy
 
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        corners = []
-        for obj in objects:
-            evaluated = obj.evaluated_get(depsgraph)
-            if obj.type == "MESH" and not len(evaluated.data.polygons):
+        from wdss.render.materials import GEOMETRY_TYPES
+
+        corners, objects = [], {}
+        for instance in bpy.context.evaluated_depsgraph_get().object_instances:
+            evaluated = instance.object
+            if evaluated.type not in GEOMETRY_TYPES or evaluated.original.hide_render:
+                continue
+            if evaluated.type == "MESH" and not len(evaluated.data.polygons):
                 continue
             local = np.array([list(c) for c in evaluated.bound_box], dtype=np.float64)
-            if not local.size:
-                continue
-            matrix = np.array(evaluated.matrix_world, dtype=np.float64)
+            matrix = np.array(instance.matrix_world, dtype=np.float64)
             corners.append(local @ matrix[:3, :3].T + matrix[:3, 3])
+            objects[evaluated.original.name] = evaluated.original
         if not corners:
-            return None
+            return [], None
         points = np.concatenate(corners)
-        return points.min(0), points.max(0)
+        return list(objects.values()), (points.min(0), points.max(0))
 
     def _light(self, lighting: str, seed: int) -> dict[str, Any]:
+        import bpy
+
         from wdss.render.blender import add_hdri_and_sun
         from wdss.render.spec import HDRIS
 
         scene = self.scene
-        lights = sorted(o.name for o in scene.objects if o.type == "LIGHT" and not o.hide_render)
+        lights = sorted(o.name for o in bpy.context.view_layer.objects if o.type == "LIGHT" and not o.hide_render)
         world = scene.world
         environment = bool(
             world and world.node_tree and any(n.type in ("TEX_ENVIRONMENT", "TEX_SKY") for n in world.node_tree.nodes)
