@@ -303,3 +303,31 @@ def test_g_buffers_see_through_the_cut_out_parts_of_a_material(cutout):
     np.testing.assert_allclose(depth[right], 4.0, atol=1e-4)  # the leaf
     np.testing.assert_allclose(base[(slice(None), *left)].reshape(3, -1).T, [[0.2, 0.8, 0.2]] * 56, atol=1e-4)
     np.testing.assert_allclose(base[(slice(None), *right)].reshape(3, -1).T, [[0.9, 0.1, 0.1]] * 56, atol=1e-4)
+
+
+def test_a_fly_through_stays_inside_a_room_at_eye_height(tmp_path):
+    """Blender's ray casts find the floor, the head room and the walls of a closed room (planes facing in)."""
+    import bpy
+
+    from wdss.render.camera_path import EYE_HEIGHT
+    from wdss.render.scene_file import FileScene
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    for location, rotation in (
+        ((0, 0, 0), (0, 0, 0)),  # floor
+        ((0, 0, 3), (math.pi, 0, 0)),  # ceiling
+        ((0, 4, 1.5), (math.pi / 2, 0, 0)),
+        ((0, -4, 1.5), (-math.pi / 2, 0, 0)),
+        ((4, 0, 1.5), (0, -math.pi / 2, 0)),
+        ((-4, 0, 1.5), (0, math.pi / 2, 0)),
+    ):
+        bpy.ops.mesh.primitive_plane_add(size=8.0, location=location, rotation=rotation)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, 0.5))  # a crate in the middle
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "room.blend"))
+    scene = FileScene(tmp_path / "room.blend", seed=3, frames=30, resolution=SIZE, camera="fly", lighting="file")
+    assert scene.description["camera"]["mode"] == "fly"
+    eyes = np.array([pose[:3, 3] for pose in scene.poses.values()])
+    assert np.all(np.abs(eyes[:, :2]) < 4.0 - 0.2)
+    assert not np.any(np.all(np.abs(eyes[:, :2]) < 0.5 + 0.2, axis=1))  # not through the crate
+    np.testing.assert_allclose(eyes[:, 2], EYE_HEIGHT, atol=0.05)
+    assert np.linalg.norm(eyes[-1] - eyes[0]) > 0.5
