@@ -262,6 +262,8 @@ class FileScene:
             return mode, {"object": own.name, "moving": moving}
         data = bpy.data.cameras.new("wdss_camera")
         data.sensor_width, data.sensor_fit = 36.0, "AUTO"
+        diagonal = float(np.linalg.norm(hi - lo))  # clip planes for the scene's scale (Blender: 0.1 to 100)
+        data.clip_start, data.clip_end = min(0.1, 1e-3 * diagonal), max(100.0, 10.0 * diagonal)
         obj = bpy.data.objects.new("wdss_camera", data)
         scene.collection.objects.link(obj)
         scene.camera = obj
