@@ -32,6 +32,13 @@ def reproject(depth: np.ndarray, current: np.ndarray, previous: np.ndarray, fx_f
     return world[..., :3], np.stack([x - x_prev, y_up - y_prev])
 
 
+def project(points: np.ndarray, camera_to_world: np.ndarray, fx_fy_cx_cy) -> np.ndarray:
+    """Pixel positions ``(2, N)`` (x right, y up from the bottom) of world ``points`` ``(N, 3)``."""
+    fx, fy, cx, cy = fx_fy_cx_cy
+    local = np.concatenate([points, np.ones((len(points), 1))], axis=1) @ np.linalg.inv(camera_to_world).T
+    return np.stack([cx + fx * local[:, 0] / -local[:, 2], cy + fy * local[:, 1] / -local[:, 2]])
+
+
 def check_conventions(folder: Path, *, tolerance: float = 0.05) -> dict[int, dict[str, np.ndarray]]:
     """Assert the conventions on every HR frame after the first of the sequence at ``folder``: the median
     motion error of surfaces and of the sky is below ``tolerance`` pixels, normals have unit length on surfaces

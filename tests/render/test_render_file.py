@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.render.conventions import check_conventions, load_sidecar
+from tests.render.conventions import check_conventions, load_sidecar, project
 from wdss.data import Sequence
 
 pytest.importorskip("bpy", reason="needs the render extra: make setup-render")
@@ -23,7 +23,8 @@ SETTINGS = dict(frames=2, resolution=SIZE, scales=(2,), samples=2, denoise=False
 BLOCKS = {(0, 0): (200, 40, 30), (0, 1): (30, 160, 60), (1, 0): (40, 60, 200), (1, 1): (220, 200, 40)}
 TILT = math.radians(30)  # the ground's normal map tilts every normal by this angle towards +u (world +x)
 CAMERA = [(-0.5 + 0.3 * f, -6.0, 1.5) for f in range(4)]  # the file camera's keyed positions, frames 0..3
-LAMP = (1.8, 0.0, 0.4)  # centre of the emissive sphere, radius 0.4
+LAMP = (1.8, 0.0, 0.4)  # centre of the emissive sphere (radius 0.4) at frame 0; it moves by DRIFT per frame
+DRIFT = np.array([-0.1, 0.0, 0.0])
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -86,6 +87,9 @@ def build_scene(folder, *, camera: bool = True, meshes: bool = True, light: bool
         bsdf.inputs["Emission Strength"].default_value = 5.0
         bpy.ops.mesh.primitive_uv_sphere_add(radius=0.4, location=LAMP)
         bpy.context.object.data.materials.append(lamp)
+        for frame in range(4):  # the file's own object animation
+            bpy.context.object.location = np.asarray(LAMP) + frame * DRIFT
+            bpy.context.object.keyframe_insert("location", frame=frame)
 
     if custom_material:
         group = bpy.data.node_groups.new("toon", "ShaderNodeTree")
@@ -145,10 +149,12 @@ def test_a_glb_renders_from_its_animated_camera_with_the_conventions(glb, tmp_pa
     assert scene["camera"] == {"mode": "file", "object": "camera", "moving": True}
     assert scene["lighting"]["mode"] == "file" and scene["lighting"]["file_lights"] == ["bulb"]
     assert scene["material_fallbacks"] == [] and meta["settings"]["scene"]["file"] == "scene.glb"
+    assert scene["animations"] == {"camera": "cameraAction", "Sphere": "SphereAction"}  # two glTF animations
     for frame in (0, 1, 2):  # frame 0 is the file's first keyed frame
         np.testing.assert_allclose(cameras[frame][:3, 3], CAMERA[frame], atol=1e-4)
     blocks = normals = lamp = 0
-    for buffers in frames.values():
+    intrinsics = meta["intrinsics"]["fx_fy_cx_cy"]
+    for frame, buffers in frames.items():
         world, surface, base = buffers["world"], buffers["surface"], buffers["base_color"]
         # The wall (y = 1): base colour is its texture's texel, linear; u = (x + 1) / 2, v = z / 2. (Away from
         # texel borders and the wall's own edges, where a pixel's samples may straddle two surfaces.)
@@ -165,10 +171,14 @@ def test_a_glb_renders_from_its_animated_camera_with_the_conventions(glb, tmp_pa
         expected = [math.sin(TILT), 0.0, math.cos(TILT)]
         np.testing.assert_allclose(np.median(buffers["normal"][:, ground], axis=1), expected, atol=0.03)
         normals += ground.sum()
-        # The emissive sphere outshines the lit ground.
-        sphere = surface & (np.abs(np.linalg.norm(world - LAMP, axis=-1) - 0.4) < 0.02)
+        # The emissive sphere outshines the lit ground, and moves as the file animates it: its points were
+        # DRIFT back in the previous frame.
+        sphere = surface & (np.abs(np.linalg.norm(world - (LAMP + frame * DRIFT), axis=-1) - 0.4) < 0.02)
         luminance = buffers["color"].astype(np.float64).mean(0)
         assert np.median(luminance[sphere]) > 3 * np.median(luminance[ground])
+        current = project(world[sphere], cameras[frame], intrinsics)
+        previous = project(world[sphere] - DRIFT, cameras[frame - 1], intrinsics)
+        assert np.median(np.hypot(*(buffers["motion"][:, sphere] - (current - previous)))) < 0.05
         lamp += sphere.sum()
     assert blocks == 8 and normals > 200 and lamp > 10
 

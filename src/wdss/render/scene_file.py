@@ -17,7 +17,7 @@
   file's camera is made a pinhole with Blender's default 36 mm sensor (same field of view at the rendered
   size, no lens shift, no depth of field), so one ``intrinsics`` entry describes every frame.
 * Frame 0 of the sequence is the file's first frame: the ``.blend`` scene's start frame, or a glTF's
-  earliest keyframe (0 without animation).
+  earliest keyframe (0 without animation). A glTF's animated objects all play, each its first animation.
 """
 
 from __future__ import annotations
@@ -117,6 +117,7 @@ class FileScene:
             raise ValueError(f"{where} could not be read: {str(err).strip()}") from err
         scene = self.scene = bpy.context.scene
         layer = bpy.context.view_layer
+        played = self._play_gltf_animations() if self.kind == "gltf" else None
         self.offset = self._first_frame()
         scene.frame_set(self.offset)
         geometry, bounds = self._geometry()
@@ -140,6 +141,7 @@ class FileScene:
             "kind": self.kind,
             "sha256": digest or file_digest(path),
             "frame_offset": self.offset,
+            **({"animations": played} if played is not None else {}),
             "bounds": [lo.round(6).tolist(), hi.round(6).tolist()],
             "camera": {"mode": mode, **camera_info},
             "lighting": lights,
@@ -147,6 +149,28 @@ class FileScene:
         }
 
     # -- loading -------------------------------------------------------------------------------------------------
+    @staticmethod
+    def _play_gltf_animations() -> dict[str, str]:
+        """Let every animated object of a glTF play, each its first animation; which ones, by object.
+
+        Blender's importer makes the file's first animation active and leaves the others as muted NLA tracks,
+        but an exporter writes one animation per animated object (Blender's does), so a camera animated in
+        the second one would stand still."""
+        import bpy
+
+        played = {}
+        for obj in bpy.data.objects:
+            data = obj.animation_data
+            if data is None:
+                continue
+            if data.action is None:
+                strips = [strip for track in data.nla_tracks for strip in track.strips if strip.action]
+                if not strips:
+                    continue
+                data.action = strips[0].action
+            played[obj.name] = data.action.name
+        return played
+
     def _first_frame(self) -> int:
         import bpy
 
