@@ -264,7 +264,8 @@ class FileScene:
 
         scene = self.scene
         own = self._file_camera()
-        file_poses = self._evaluated_poses(own, frames) if own is not None else None
+        wanted = own is not None and camera in ("auto", "file")
+        file_poses = self._evaluated_poses(own, frames) if wanted else None
         moving = file_poses is not None and any(
             not np.allclose(p, file_poses[0], atol=1e-6) for p in file_poses.values()
         )
