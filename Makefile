@@ -9,7 +9,7 @@ PY := $(VENV)/bin/python
 PIP_INSTALL := $(PY) -m pip install --disable-pip-version-check -q -c constraints.txt
 export MLFLOW_DISABLE_TELEMETRY ?= true
 
-.PHONY: help setup setup-render setup-cluster test test-fast lint format train ui server bench data clean
+.PHONY: help setup setup-render setup-cluster test test-fast lint format train ui server bench data pack clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | sort | \
@@ -37,6 +37,10 @@ $(VENV)/.installed-cluster: $(VENV)/.installed
 data: setup-render ## render the default dataset (data/mini, a few minutes) ahead of training
 	$(PY) -m wdss.render -cn mini
 
+pack: setup-render ## pack data/mini into data/mini.packed (read patch by patch; training uses it when present)
+	test -d data/mini || $(PY) -m wdss.render -cn mini
+	$(PY) -m wdss.data.pack root=data/mini $(ARGS)
+
 test: setup-render setup-cluster ## run the whole test suite, slow (rendering, DDP, server, launcher) tests included
 	$(PY) -m pytest -n auto
 
@@ -51,8 +55,8 @@ format: setup ## ruff: fix what can be fixed and format
 	$(PY) -m ruff check --fix src tests
 	$(PY) -m ruff format src tests
 
-train: setup-render ## a short default training (renders data/mini on first use), tracked in MLflow
-	$(PY) -m wdss.train experiment=cpu
+train: setup-render ## a short default training (renders data/mini on first use), tracked in MLflow; ARGS: overrides
+	$(PY) -m wdss.train experiment=cpu $(ARGS)
 
 # The store training logs to (conf/logger/mlflow.yaml): $MLFLOW_TRACKING_URI when set, else mlflow.db here.
 TRACKING_URI := $(or $(MLFLOW_TRACKING_URI),sqlite:///mlflow.db)

@@ -36,6 +36,8 @@ import numpy as np
 import torch
 
 from wdss.data.exr import read_exr, read_exr_size
+from wdss.data.preprocess import depth_range as frame_depth_range
+from wdss.data.sampling import crop
 
 __all__ = [
     "BUFFERS",
@@ -329,6 +331,10 @@ class Sequence:
     def has(self, buffer: str, height: int, frame: int | None = None) -> bool:
         return self.file(buffer, height, self.frames[0] if frame is None else frame) is not None
 
+    def frames_at(self, height: int) -> list[int]:
+        """The frames that have files at ``height``."""
+        return self.layout.frames(self._index, height)
+
     def file(self, buffer: str, height: int, frame: int) -> str | None:
         """The file (relative to the sequence) holding ``buffer`` of ``frame`` at ``height``, or None."""
         found = self.layout.locate(buffer, height, frame, self._index)
@@ -417,13 +423,10 @@ class Sequence:
 
         An EXR file is decoded whole; the depth plane is read for the range even when ``depth`` is not asked for.
         """
-        from wdss.data.preprocess import depth_range as range_of
-        from wdss.data.sampling import crop
-
         wanted = list(dict.fromkeys(buffers))
         extra = depth_range and "depth" not in wanted
         full = self.read(frame, height, [*wanted, "depth"] if extra else wanted, sanitize=sanitize)
-        found = range_of(full["depth"], depth_far) if depth_range else None
+        found = frame_depth_range(full["depth"], depth_far) if depth_range else None
         return {k: crop(full[k], window) for k in wanted}, found
 
     def _check_size(self, frame: int, height: int, stem: str, name: str, size: tuple[int, int]) -> None:

@@ -227,7 +227,7 @@ def pack_sequence(
         import zstandard
 
         compressor = zstandard.ZstdCompressor(level=level, write_checksum=True, write_content_size=True)
-    frames_at = {h: seq.layout.frames(seq._index, h) for h in seq.resolutions}
+    frames_at = {h: seq.frames_at(h) for h in seq.resolutions}
     todo = sum(len(f) - len(index["resolutions"].get(str(h), {}).get("packed", {})) for h, f in frames_at.items())
     progress = Progress(f"pack {seq.name}", todo)
     try:

@@ -42,6 +42,7 @@ FORMAT = "wdss-packed"
 VERSION = 1
 INDEX = "index.json"
 CODECS = ("zstd", "none")
+DTYPES = ("float16", "float32")  # what a buffer is stored as: half where the source is half, float otherwise
 
 
 def far_key(far: float | None) -> str:
@@ -91,6 +92,12 @@ class PackedSequence:
         if index.get("version") != VERSION:
             raise SceneError(f"{where} is version {index.get('version')} of the packed format, wdss reads {VERSION}")
         self.index = index
+        try:
+            self._check(index)
+        except (KeyError, TypeError, ValueError) as err:
+            raise SceneError(
+                f"packed index {where} is malformed ({type(err).__name__}: {err}): {repack_hint(self.folder)}"
+            ) from err
         self.name: str = index["sequence"]
         if not index.get("complete"):
             raise SceneError(
@@ -122,6 +129,23 @@ class PackedSequence:
         self._cameras, self.frame_rate = (
             parse_sidecar(sidecar.read_bytes(), str(sidecar)) if sidecar.is_file() else ({}, DEFAULT_FRAME_RATE)
         )
+
+    @staticmethod
+    def _check(index: dict) -> None:
+        """The index's values are what a packed index holds: dtypes, codecs and sizes from short allowlists."""
+        if index["codec"] not in CODECS or int(index["tile"]) < 0 or not isinstance(index["sequence"], str):
+            raise ValueError(f"codec {index['codec']!r}, tile {index['tile']!r}")
+        if not index["resolutions"]:
+            raise ValueError("no resolutions")
+        for height, res in index["resolutions"].items():
+            int(height)
+            if Path(res["file"]).name != res["file"] or len(res["shape"]) != 2:
+                raise ValueError(f"file {res['file']!r}, shape {res['shape']!r}")
+            for buffer, spec in res["buffers"].items():
+                if buffer not in BUFFERS or spec["dtype"] not in DTYPES or len(spec["channels"]) != BUFFERS[buffer]:
+                    raise ValueError(f"buffer {buffer!r}: {spec!r}")
+            for frame, record in res["packed"].items():
+                int(frame), int(record["offset"]), int(record["length"])
 
     def __repr__(self) -> str:
         return f"PackedSequence({self.name!r}, resolutions={self.resolutions}, frames={len(self.frames)})"
