@@ -269,8 +269,19 @@ class PackedSequence:
             raise self._corrupt(height, frame, "its record is shorter than its chunk table")
         table = np.frombuffer(mm, dtype="<i8", count=len(names) * rows * cols * 2, offset=start)
         table = table.reshape(len(names), rows, cols, 2)[names.index(buffer)]
-        for ty in range(y0 // t, (y1 - 1) // t + 1):
-            for tx in range(x0 // t, (x1 - 1) // t + 1):
+        rows_in, cols_in = range(y0 // t, (y1 - 1) // t + 1), range(x0 // t, (x1 - 1) // t + 1)
+        if len(rows_in) * len(cols_in) > 1 and rows_in.stop * t <= full_h and cols_in.stop * t <= full_w:
+            size = channels * t * t * dtype.itemsize
+            window_table = table[rows_in.start : rows_in.stop, cols_in.start : cols_in.stop]
+            grid = self._tile_grid(mm, window_table, start, length, table_bytes, size)
+            if grid is not None:  # None: a chunk that is out of place or does not decode, named by the loop below
+                grid = grid.view(dtype).reshape(len(rows_in), len(cols_in), channels, t, t)
+                grid = grid.transpose(2, 0, 3, 1, 4).reshape(channels, len(rows_in) * t, len(cols_in) * t)
+                top, left = rows_in.start * t, cols_in.start * t
+                out[:, y0 - y : y1 - y, x0 - x : x1 - x] = grid[:, y0 - top : y1 - top, x0 - left : x1 - left]
+                return out
+        for ty in rows_in:
+            for tx in cols_in:
                 th, tw = min(t, full_h - ty * t), min(t, full_w - tx * t)
                 size = channels * th * tw * dtype.itemsize
                 offset, count = int(table[ty, tx, 0]), int(table[ty, tx, 1])
@@ -294,6 +305,24 @@ class PackedSequence:
                     :, ty0 - ty * t : ty1 - ty * t, tx0 - tx * t : tx1 - tx * t
                 ]
         return out
+
+    def _tile_grid(self, mm: np.memmap, table: np.ndarray, start: int, length: int, table_bytes: int, size: int):
+        """Whole tiles of ``size`` bytes, decoded and concatenated in row-major order (one decode call per tile, no
+        array per tile), or None where a chunk lies outside its record or does not decode to a whole tile."""
+        offsets, counts = table[..., 0].ravel(), table[..., 1].ravel()
+        if (offsets < table_bytes).any() or (counts < 0).any() or (offsets + counts > length).any():
+            return None
+        view = memoryview(mm)
+        try:
+            chunks = [
+                self._decode(view[start + o : start + o + c], size)
+                for o, c in zip(offsets.tolist(), counts.tolist(), strict=True)
+            ]
+        except Exception:  # the tile-by-tile loop names the chunk
+            return None
+        if any(len(c) != size for c in chunks):
+            return None
+        return np.frombuffer(b"".join(chunks), dtype=np.uint8)
 
     def _depth_range(self, frame: int, height: int, far: float | None) -> tuple[float, float]:
         """The whole frame's depth range: recorded at packing for its far clamp, else computed once (cached)."""
