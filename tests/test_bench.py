@@ -86,3 +86,17 @@ def test_learn_measures_tone_mapped_l1_whatever_the_loss_terms():
     table = bench.bench_learn(overrides, steps=1, every=1, held=1, epochs=3)
     cells = {column.header: column._cells for column in table.columns}
     assert cells["model: L1"][0] == cells["plain CNN: L1"][0] and float(cells["model: L1"][0]) > 0
+
+
+@pytest.mark.slow  # a DataLoader with two worker processes: ~15 s
+def test_data_table_rates_every_source_in_both_placements_against_a_training_step(capsys):
+    bench.main(["data", "--size", "48", "64", "--patch", "24", "--batch", "2", "--frames", "2", "--repeats", "1"]
+               + ["--step-repeats", "1", "--fetch-steps", "1", "--widths", "small"])  # fmt: skip
+    out = capsys.readouterr().out
+    rows = table_rows(out)
+    for source in ("EXR (zip, half)", "packed zstd", "packed raw"):
+        for placement in ("loader", "device"):
+            ms, rate, to_exr, to_step = rows[source, placement]
+            assert float(ms) > 0 and float(rate) > 0 and float(to_exr.rstrip("x")) > 0 and to_step.endswith("x")
+    assert rows["EXR (zip, half)", "loader"][2] == "1.0x" and rows["training step", "-"][3] == "1.0x"
+    assert "time each step waits for its batch" in out
