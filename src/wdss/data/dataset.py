@@ -199,8 +199,8 @@ class FrameDataset(Dataset):
         # HR frame) is: the spatial mask compares HR depth with LR depth, and both paths must agree.
         ranged = {
             role: prep.depth_normalize
-            and ("depth" in buffers or any(_HR_OF[low] == role and "depth" in reads[low][2] for low in _HR_OF))
-            for role, (_, _, buffers) in reads.items()
+            and ("depth" in reads[role][2] or any(hr == role and "depth" in reads[lr][2] for lr, hr in _HR_OF.items()))
+            for role in ("hr", "prev", "prev2")
         }
         available = set(seq.frames)
         out: dict = {"sequence": seq.name, "frame": frame, "ranges": {}, "margins": {"prev": 0, "prev2": 0}}
@@ -208,7 +208,7 @@ class FrameDataset(Dataset):
         for role in ROLES:
             number, height, buffers = reads[role]
             box = lr_box if role in _HR_OF else hr_box
-            if role in ("prev", "prev2") and box is not None and self.warps:
+            if role in ("prev", "prev2") and box is not None and self.warps and buffers:
                 # The previous frame's window: the patch grown by the extent of the motion that points into it.
                 motion = out["hr" if role == "prev" else "prev"].get("motion")
                 margin += _margin(motion, seq.shape(seq.hr)) if motion is not None else 0
@@ -217,7 +217,7 @@ class FrameDataset(Dataset):
                 out["margins"][role] = margin
             if role in _HR_OF and "depth" in buffers and prep.depth_normalize:
                 out["ranges"][role] = out["ranges"][_HR_OF[role]]
-            want_range = ranged[role] and role not in _HR_OF
+            want_range = ranged.get(role, False)
             if not buffers and not want_range:
                 out[role] = {}
                 continue
