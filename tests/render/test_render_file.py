@@ -341,3 +341,72 @@ def test_a_fly_through_stays_inside_a_room_at_eye_height(tmp_path):
     assert not np.any(np.all(np.abs(eyes[:, :2]) < 0.5 + 0.2, axis=1))  # not through the crate
     np.testing.assert_allclose(eyes[:, 2], EYE_HEIGHT, atol=0.05)
     assert np.linalg.norm(eyes[-1] - eyes[0]) > 0.5
+
+
+def test_a_file_cameras_own_sensor_and_keyed_lens_render_as_the_recorded_intrinsics(tmp_path):
+    """A camera with a 24x20 mm sensor fitted vertically, its lens and shift keyed (holding still): every frame
+    renders with the focal length the sidecar's intrinsics give, not the file's."""
+    from wdss.render.scene_file import FileScene
+    from wdss.render.spec import intrinsics
+
+    bpy = build_scene(tmp_path)
+    data = bpy.context.scene.camera.data
+    data.sensor_fit, data.sensor_width, data.sensor_height = "VERTICAL", 24.0, 20.0
+    for frame in range(4):
+        data.lens, data.shift_x = 50.0, 0.1
+        data.keyframe_insert("lens", frame=frame)
+        data.keyframe_insert("shift_x", frame=frame)
+    path = tmp_path / "zoom.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    scene = FileScene(path, seed=0, frames=2, resolution=SIZE, camera="file")
+    fx = intrinsics(scene.lens, *SIZE)[0]
+    assert fx == pytest.approx(50.0 / 20.0 * SIZE[1])  # the file camera's field of view, kept
+    for frame in range(3):
+        scene.scene.frame_set(scene.offset + frame)
+        camera = scene.scene.camera
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        projection = camera.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=SIZE[0], y=SIZE[1])
+        assert projection[0][0] * SIZE[0] / 2 == pytest.approx(fx, rel=1e-5), frame
+        assert projection[0][2] == pytest.approx(0.0, abs=1e-6) and camera.data.shift_x == 0.0, frame
+
+
+def test_objects_hidden_in_the_viewport_but_rendered_are_framed_and_wired(tmp_path):
+    """Bounds, AOV wiring and ray casts see what renders: not what the viewport happens to show."""
+    import bpy
+
+    from wdss.render.scene_file import FileScene
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_plane_add(size=4.0)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(6.0, 0.0, 0.5))
+    crate = bpy.context.object
+    crate.name, crate.hide_viewport = "crate", True  # the monitor icon: hidden in viewports, rendered
+    crate.data.materials.append(bpy.data.materials.new("crate"))
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, 9.0))
+    bpy.context.object.name, bpy.context.object.hide_render = "helper", True  # shown, never rendered
+    path = tmp_path / "hidden.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    scene = FileScene(path, seed=0, frames=2, resolution=SIZE, camera="orbit", lighting="file")
+    np.testing.assert_allclose(scene.description["bounds"], [[-2.0, -2.0, 0.0], [6.5, 2.0, 1.0]], atol=1e-5)
+    nodes = bpy.data.materials["crate"].node_tree.nodes
+    assert {n.aov_name for n in nodes if n.type == "OUTPUT_AOV"} == {"basecolor", "roughness", "metallic"}
+    ray_cast = scene._ray_caster()
+    distances, _ = ray_cast(0, np.array([[6.0, -5.0, 0.5], [0.0, 0.0, 5.0]]), np.array([[0, 1.0, 0], [0, 0, 1.0]]))
+    assert distances[0] == pytest.approx(4.5) and np.isinf(distances[1])
+
+
+def test_a_blend_files_own_sample_settings_do_not_override_the_configured_samples(tmp_path):
+    import bpy
+
+    from wdss.render.scene_file import FileScene
+
+    build_scene(tmp_path)
+    scene = bpy.context.scene
+    scene.view_layers[0].samples = 512  # a view layer's sample override
+    scene.cycles.time_limit, scene.cycles.use_sample_subset = 0.5, True
+    scene.render.use_multiview = True
+    path = tmp_path / "samples.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    loaded = FileScene(path, seed=0, frames=2, resolution=SIZE, samples=3).scene
+    assert loaded.view_layers[0].samples == 0 and loaded.cycles.time_limit == 0.0
+    assert not loaded.cycles.use_sample_subset and not loaded.render.use_multiview

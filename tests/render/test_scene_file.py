@@ -2,10 +2,21 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
+import struct
+
 import pytest
 
-from wdss.render.scene_file import check_scene
+from wdss.render.scene_file import check_scene, file_digest, scene_resources
 from wdss.render.sequence import render_sequences
+
+
+def glb(gltf: dict) -> bytes:
+    """A glTF 2.0 binary holding ``gltf`` as its JSON chunk (and no binary chunk)."""
+    text = json.dumps(gltf).encode()
+    text += b" " * (-len(text) % 4)
+    return struct.pack("<4sII", b"glTF", 2, 20 + len(text)) + struct.pack("<I4s", len(text), b"JSON") + text
 
 
 def test_a_procedural_scene_takes_the_default_camera_and_lighting():
@@ -26,17 +37,63 @@ def test_a_procedural_scene_takes_the_default_camera_and_lighting():
 )
 def test_bad_settings_are_refused(tmp_path, monkeypatch, scene, camera, lighting, error, message):
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "scene.glb").write_bytes(b"glTF")
+    (tmp_path / "scene.glb").write_bytes(glb({"asset": {"version": "2.0"}}))
     with pytest.raises(error, match=message):
         check_scene(scene, camera, lighting, where="sequence 'a'")
 
 
 def test_every_sequence_is_checked_before_the_first_is_rendered(tmp_path):
     good = tmp_path / "scene.glb"
-    good.write_bytes(b"glTF")
+    good.write_bytes(glb({"asset": {"version": "2.0"}}))
     sequences = [{"name": "a", "seed": 0, "scene": str(good)}, {"name": "b", "seed": 1, "scene": "gone.blend"}]
     with pytest.raises(FileNotFoundError, match=r"render\.scene \(sequence 'b'\): gone\.blend does not exist"):
         render_sequences(tmp_path / "out", sequences, frames=1, resolution=(32, 16), scales=(2,))
     with pytest.raises(ValueError, match=r"render\.sequences\[0\] needs a name and a seed"):
         render_sequences(tmp_path / "out", [{"name": "a"}], frames=1)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_gltf_digest_covers_every_file_it_references(tmp_path):
+    """A .gltf's buffers and images live beside it: a changed .bin or texture is another scene (no resume)."""
+    (tmp_path / "tex").mkdir()
+    (tmp_path / "mesh.bin").write_bytes(b"\0" * 8)
+    (tmp_path / "tex" / "wall a.png").write_bytes(b"png")
+    gltf = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"uri": "mesh.bin", "byteLength": 8}, {"uri": "data:application/octet-stream;base64,AAAA"}],
+        "images": [{"uri": "tex/wall%20a.png"}, {"bufferView": 0, "mimeType": "image/png"}],
+    }
+    path = tmp_path / "scene.gltf"
+    path.write_text(json.dumps(gltf))
+    assert [uri for uri, _ in scene_resources(path)] == ["mesh.bin", "tex/wall%20a.png"]
+    assert scene_resources(path)[1][1] == tmp_path / "tex" / "wall a.png"
+    digests = {file_digest(path)}
+    (tmp_path / "mesh.bin").write_bytes(b"\1" * 8)
+    digests.add(file_digest(path))
+    (tmp_path / "tex" / "wall a.png").write_bytes(b"PNG")
+    digests.add(file_digest(path))
+    assert len(digests) == 3
+    assert check_scene(path, "auto", "auto", where="sequence 'a'") == path.resolve()
+    # A .glb with no external file keeps the digest of the file alone (as sidecars written before record it);
+    # one with an external texture covers it too.
+    inside = tmp_path / "inside.glb"
+    inside.write_bytes(glb({"asset": {"version": "2.0"}, "images": [{"uri": "data:image/png;base64,AAAA"}]}))
+    assert file_digest(inside) == hashlib.sha256(inside.read_bytes()).hexdigest()
+    outside = tmp_path / "outside.glb"
+    outside.write_bytes(glb({"asset": {"version": "2.0"}, "images": [{"uri": "tex/wall%20a.png"}]}))
+    before = file_digest(outside)
+    (tmp_path / "tex" / "wall a.png").write_bytes(b"png2")
+    assert file_digest(outside) != before
+
+
+def test_a_missing_or_unreadable_gltf_resource_is_named_before_anything_is_written(tmp_path):
+    path = tmp_path / "scene.gltf"
+    path.write_text(json.dumps({"asset": {"version": "2.0"}, "buffers": [{"uri": "gone.bin", "byteLength": 4}]}))
+    sequences = [{"name": "a", "seed": 0}, {"name": "b", "seed": 1, "scene": str(path)}]
+    message = r"render\.scene \(sequence 'b'\): .*scene\.gltf references 'gone\.bin', and .*gone\.bin does not exist"
+    with pytest.raises(FileNotFoundError, match=message):
+        render_sequences(tmp_path / "out", sequences, frames=1, resolution=(32, 16), scales=(2,))
+    path.write_text("{not json")
+    with pytest.raises(ValueError, match=r"render\.scene \(sequence 'b'\): .*scene\.gltf could not be read"):
+        render_sequences(tmp_path / "out", sequences, frames=1, resolution=(32, 16), scales=(2,))
     assert not (tmp_path / "out").exists()

@@ -196,6 +196,12 @@ def configure_cycles(scene, layer, *, seed: int, threads: int = 0) -> None:
     cycles = scene.cycles
     cycles.device = "CPU"
     cycles.use_adaptive_sampling = False
+    # The sample count is wdss's (samples, lr_samples): a .blend's view layer override, time limit or sample
+    # subset would change it silently. One view, not a stereo pair.
+    layer.samples = 0
+    cycles.time_limit = 0.0
+    cycles.use_sample_subset = False
+    scene.render.use_multiview = False
     cycles.seed = seed
     cycles.use_animated_seed = True
     scene.render.use_motion_blur = False

@@ -23,13 +23,17 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import logging
+import os
+import struct
 from pathlib import Path
 from typing import Any
+from urllib.parse import unquote
 
 import numpy as np
 
-__all__ = ["CAMERAS", "LIGHTINGS", "SCENE_KINDS", "FileScene", "check_scene", "file_digest"]
+__all__ = ["CAMERAS", "LIGHTINGS", "SCENE_KINDS", "FileScene", "check_scene", "file_digest", "scene_resources"]
 
 log = logging.getLogger(__name__)
 
@@ -55,17 +59,71 @@ def check_scene(scene: str | Path | None, camera: str, lighting: str, *, where: 
         raise ValueError(f"render.scene ({where}): {path} is not a scene file wdss reads ({', '.join(SCENE_KINDS)})")
     if not path.is_file():
         raise FileNotFoundError(f"render.scene ({where}): {path} does not exist")
+    for uri, resource in scene_resources(path, where=f"render.scene ({where})"):
+        if not resource.is_file():
+            raise FileNotFoundError(f"render.scene ({where}): {path} references {uri!r}, and {resource} does not exist")
     return path.resolve()
 
 
-def file_digest(path: Path) -> str:
-    """SHA-256 of the file itself, not of a ``.gltf``'s external buffers and images (a resumed render refuses a
-    changed scene)."""
+def _gltf_json(path: Path, where: str) -> dict[str, Any]:
+    """The JSON of a ``.gltf``, or of a ``.glb``'s first chunk (read without the binary chunk)."""
+    try:
+        with open(path, "rb") as handle:
+            if path.suffix.lower() == ".glb":
+                magic, version, _, length, kind = struct.unpack("<4sIII4s", handle.read(20))
+                if magic != b"glTF" or version != 2 or kind != b"JSON":
+                    raise ValueError("not a glTF 2.0 binary (header)")
+                text = handle.read(length)
+            else:
+                text = handle.read()
+        gltf = json.loads(text.decode("utf-8-sig"))
+    except (struct.error, UnicodeDecodeError, ValueError) as err:
+        raise ValueError(f"{where}: {path} could not be read: {err}") from err
+    if not isinstance(gltf, dict):
+        raise ValueError(f"{where}: {path} could not be read: its JSON is not an object")
+    return gltf
+
+
+def scene_resources(path: Path, *, where: str = "render.scene") -> list[tuple[str, Path]]:
+    """The external files a glTF (``.gltf``, or a ``.glb`` with external textures) references, as ``(uri,
+    path)`` sorted by URI: the URIs of its buffers and images other than ``data:`` URIs, resolved as Blender's
+    importer resolves them (unquoted, relative to the file's folder); none for a ``.blend``."""
+    if SCENE_KINDS[path.suffix.lower()] != "gltf":
+        return []
+    gltf = _gltf_json(path, where)
+    uris = set()
+    for key in ("buffers", "images"):
+        entries = gltf.get(key) or []
+        for entry in entries if isinstance(entries, list) else []:
+            uri = entry.get("uri") if isinstance(entry, dict) else None
+            if isinstance(uri, str) and uri and not uri.startswith("data:"):
+                uris.add(uri)
+    return [(uri, path.parent / os.path.normpath(unquote(uri.replace("\\", "/")))) for uri in sorted(uris)]
+
+
+def _sha256(path: Path) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as handle:
         for block in iter(lambda: handle.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a scene (a resumed render refuses a changed one): of the file itself, or, for a glTF that
+    references external buffers or images (:func:`scene_resources`), of a ``sha256sum``-style listing of the
+    file and each of them (``<sha256>  <uri>`` lines), so a changed ``.bin`` or texture changes it too.
+
+    A ``.blend``'s external images and libraries are not covered (pack them: File > External Data > Pack)."""
+    resources = scene_resources(path)
+    if not resources:
+        return _sha256(path)
+    lines = [f"{_sha256(path)}  {path.name}"]
+    for uri, resource in resources:
+        if not resource.is_file():
+            raise FileNotFoundError(f"render.scene: {path} references {uri!r}, and {resource} does not exist")
+        lines.append(f"{_sha256(resource)}  {uri}")
+    return hashlib.sha256("\n".join(lines).encode()).hexdigest()
 
 
 def _orthonormal(matrix: np.ndarray) -> np.ndarray:
@@ -117,6 +175,7 @@ class FileScene:
             raise ValueError(f"{where} could not be read: {str(err).strip()}") from err
         scene = self.scene = bpy.context.scene
         layer = bpy.context.view_layer
+        self._show_what_renders(layer)
         played = self._play_gltf_animations() if self.kind == "gltf" else None
         self.offset = self._first_frame()
         scene.frame_set(self.offset)
@@ -140,6 +199,7 @@ class FileScene:
             "file": str(path),
             "kind": self.kind,
             "sha256": digest or file_digest(path),
+            "resources": [uri for uri, _ in scene_resources(path)],
             "frame_offset": self.offset,
             **({"animations": played} if played is not None else {}),
             "bounds": [lo.round(6).tolist(), hi.round(6).tolist()],
@@ -170,6 +230,32 @@ class FileScene:
                 data.action = strips[0].action
             played[obj.name] = data.action.name
         return played
+
+    @staticmethod
+    def _show_what_renders(layer) -> None:
+        """Make the viewport show what renders: the depsgraph that finds the geometry (its bounds, the materials
+        wired for AOVs) and that ray casts check camera paths against is the viewport's, so an object hidden in
+        the viewport but rendered would be missed, and one hidden from renders would block the camera."""
+        import bpy
+
+        for collection in bpy.data.collections:
+            if collection.library is None:
+                collection.hide_viewport = collection.hide_render
+
+        def unhide(layer_collection) -> None:  # the eye in the outliner, per view layer
+            layer_collection.hide_viewport = False
+            for child in layer_collection.children:
+                unhide(child)
+
+        unhide(layer.layer_collection)
+        for obj in bpy.data.objects:
+            if obj.library is not None:
+                continue
+            obj.hide_viewport = obj.hide_render
+            for modifier in obj.modifiers:
+                modifier.show_viewport = modifier.show_render
+            if obj.name in layer.objects:
+                obj.hide_set(False, view_layer=layer)
 
     def _first_frame(self) -> int:
         import bpy
@@ -325,6 +411,9 @@ class FileScene:
             raise ValueError(f"{where}: camera {obj.name!r} zooms (its focal length is animated); use camera=orbit")
         if data.shift_x or data.shift_y:
             log.warning("%s: camera %r has a lens shift; wdss renders it centred", where, obj.name)
+        # A keyed or driven lens, sensor or shift (even one that holds still) would undo what is set below at
+        # every frame change: the rendered view would no longer be the one ``intrinsics`` describes.
+        data.animation_data_clear()
         data.shift_x = data.shift_y = 0.0
         data.dof.use_dof = False
         lens = focals.pop() * 36.0 / max(width, height)
