@@ -204,3 +204,32 @@ def test_non_finite_values_fail_unless_sanitized_and_inputs_pack_only_their_buff
         packed.read_window(2, 16, ["depth"], (0, 0, 8, 8))
     window, _ = packed.read_window(2, 16, ["depth"], (0, 0, 8, 8), sanitize=True)
     assert np.isfinite(window["depth"]).all() and packed.sanitized == {"16P:2:depth": 1}
+
+
+def test_lightning_builds_raw_batches_in_the_datamodules_hook(tmp_path):
+    """preprocess_on=device: the loader yields raw batches, and Lightning's transfer hands the model built ones."""
+    import lightning as L
+
+    seen = []
+
+    class Probe(L.LightningModule):
+        def __init__(self) -> None:
+            super().__init__()
+            self.weight = torch.nn.Parameter(torch.zeros(()))
+
+        def training_step(self, batch, batch_idx):
+            seen.append(batch)
+            return (batch["history"].mean() * self.weight).sum()
+
+        def configure_optimizers(self):
+            return torch.optim.SGD(self.parameters(), lr=0.1)
+
+    dm = SceneDataModule(FIXTURES, SPLITS, ["history", "target", "brdf"], patch_size=24, batch_size=2,
+                         preprocess_on="device")  # fmt: skip
+    trainer = L.Trainer(
+        accelerator="cpu", fast_dev_run=1, logger=False, enable_checkpointing=False, enable_progress_bar=False,
+        enable_model_summary=False, default_root_dir=tmp_path,
+    )  # fmt: skip
+    trainer.fit(Probe(), datamodule=dm)
+    assert isinstance(next(iter(dm.train_dataloader())), RawBatch)
+    assert len(seen) == 1 and seen[0]["history"].shape == (2, 3, 24, 24) and seen[0]["target"].dtype == torch.float32
