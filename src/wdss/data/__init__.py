@@ -1,4 +1,4 @@
-"""Scene data: EXR layouts, need-driven reading, preprocessing and the LightningDataModule.
+"""Scene data: EXR layouts, packed stores, need-driven reading, preprocessing and the LightningDataModule.
 
 Nothing here knows about models: the model declares the batch keys it consumes, and the data side reads
 and computes exactly those (see :mod:`wdss.data.datamodule` for the keys).
@@ -9,6 +9,8 @@ from wdss.data.datamodule import SceneDataModule
 from wdss.data.dataset import BATCH_KEYS, GBUFFER_STACK, Collate, FrameDataset, Preprocessing, requirements
 from wdss.data.exr import ExrError, read_exr, write_exr
 from wdss.data.layouts import BUFFERS, DFASRLayout, SceneError, Sequence, UnrealLayout, discover_sequences
+from wdss.data.packed import PackedSequence
+from wdss.data.preprocess import RawBatch
 from wdss.data.sampling import flip, lr_size, point_sample
 from wdss.data.tonemap import gamma, hable, reinhard, srgb, tonemap
 from wdss.data.warp import spatial_mask, temporal_mask, warp_backward
@@ -21,7 +23,9 @@ __all__ = [
     "DFASRLayout",
     "ExrError",
     "FrameDataset",
+    "PackedSequence",
     "Preprocessing",
+    "RawBatch",
     "SceneDataModule",
     "SceneError",
     "Sequence",
