@@ -47,3 +47,15 @@ def test_a_black_background_does_not_count_towards_the_median():
     color[:, :30] = 0.0  # 60 % of the frame
     exposure = auto_exposure(color)
     assert abs(np.median(luminance(color[:, 30:] * exposure)) - MIDDLE_GREY) < 1e-9
+
+
+def test_a_black_background_does_not_dilute_the_saturated_share():
+    """A small object on an empty background: at most 1 % of the *lit* values may saturate, not 1 % of a frame
+    that is mostly zeros (here 10 % of the lit values are an emitter 10x brighter than the rest)."""
+    color = np.zeros((3, 100, 100))
+    color[:, :5] = 0.02  # 5 % of the frame is lit...
+    color[:, :5, :10] = 0.2  # ...and a tenth of that glows
+    lit = color[:, luminance(color) > 0]
+    exposure = auto_exposure(color)
+    assert exposure < MIDDLE_GREY / 0.02
+    assert np.mean(lit * exposure > SATURATION * (1 + 1e-9)) <= 0.01 + 1e-9

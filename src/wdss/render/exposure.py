@@ -8,7 +8,9 @@ engine frames (DFASR's Unreal sample: pre-tonemap median 0.19, tone-mapped media
 unless that would saturate more than 1 % of the probes, in which case the bright end decides, within 1.5 stops.
 The factor is recorded in ``sequence.json`` (``exposure``) and applied to every frame and every resolution
 alike, so motion, history and demodulation stay consistent. Pixels of exactly zero radiance (the empty black
-background of a scene file lit only by its own lights) do not count towards the median.
+background of a scene file lit only by its own lights) count neither towards the median nor towards the share
+of saturated values: a frame that is 95 % black background would otherwise let a fifth of its lit values
+saturate.
 """
 
 from __future__ import annotations
@@ -28,17 +30,16 @@ def auto_exposure(color: np.ndarray, *, middle_grey: float = MIDDLE_GREY, satura
     """The factor that brings a frame's median luminance to ``middle_grey``, lowered when more than
     ``saturated_share`` of its colour values would then exceed :data:`SATURATION`.
 
-    ``color``: ``(3, H, W)`` linear radiance (non-finite values are ignored; black pixels do not count towards
-    the median). Returns a positive float.
+    ``color``: ``(3, H, W)`` linear radiance (non-finite values are ignored; black pixels count neither towards
+    the median nor towards the saturated share). Returns a positive float.
     """
     color = np.nan_to_num(np.asarray(color, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0).clip(0.0, None)
-    lit = luminance(color)
-    lit = lit[lit > 0.0]
-    median = float(np.median(lit)) if lit.size else 0.0
-    if median <= 0.0:  # an all-black frame: leave the radiance as rendered
+    brightness = luminance(color)
+    lit = brightness > 0.0
+    if not lit.any():  # an all-black frame: leave the radiance as rendered
         return 1.0
-    exposure = middle_grey / median
-    bright = float(np.quantile(color, 1.0 - saturated_share))
+    exposure = middle_grey / float(np.median(brightness[lit]))
+    bright = float(np.quantile(color[:, lit], 1.0 - saturated_share))
     if bright * exposure > SATURATION:
         # The bright end may lower the exposure by at most MAX_DARKENING: beyond that a large emitter or the sun
         # would leave the rest of the frame in the toe of the curve, where the metric sees nothing either.
