@@ -50,6 +50,15 @@ def test_every_sequence_is_checked_before_the_first_is_rendered(tmp_path):
         render_sequences(tmp_path / "out", sequences, frames=1, resolution=(32, 16), scales=(2,))
     with pytest.raises(ValueError, match=r"render\.sequences\[0\] needs a name and a seed"):
         render_sequences(tmp_path / "out", [{"name": "a"}], frames=1)
+    # A key no sequence takes (a typo, or a top-level-only key) is named before the first sequence renders.
+    typo = [{"name": "a", "seed": 0}, {"name": "b", "seed": 1, "camra": "fly"}]
+    with pytest.raises(ValueError, match=r"render\.sequences\[1\] \(sequence 'b'\): unknown key\(s\) camra"):
+        render_sequences(tmp_path / "out", typo, frames=1, resolution=(32, 16), scales=(2,))
+    with pytest.raises(ValueError, match=r"render: unknown setting\(s\) sampels"):
+        render_sequences(tmp_path / "out", [{"name": "a", "seed": 0}], sampels=4)
+    twice = [{"name": "a", "seed": 0}, {"name": "a", "seed": 1}]
+    with pytest.raises(ValueError, match=r"render\.sequences\[1\]: sequence 'a' appears twice"):
+        render_sequences(tmp_path / "out", twice, frames=1, resolution=(32, 16), scales=(2,))
     assert not (tmp_path / "out").exists()
 
 

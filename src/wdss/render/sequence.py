@@ -12,6 +12,7 @@ EXR; a frame whose files all exist is skipped when the render is run again.
 
 from __future__ import annotations
 
+import inspect
 import json
 import logging
 import os
@@ -231,6 +232,10 @@ def render_sequence(
     return folder
 
 
+# What a config (or one of its sequences) may set: render_sequence's keyword options.
+_SETTINGS = set(inspect.signature(render_sequence).parameters) - {"out_dir", "name", "seed", "progress", "spec"}
+
+
 def _probe_exposure(scene: Any, frames: int, width: int, height: int) -> float:
     """The sequence's auto exposure from quick quarter-size renders of its first, middle and last frames: one
     frame can be unrepresentative of a camera path (a lamp filling the first view)."""
@@ -252,11 +257,22 @@ def render_sequences(out_dir: str | Path, sequences: Iterable[Mapping[str, Any]]
     Every sequence's scene settings are checked before the first is rendered."""
     out_dir = Path(out_dir)
     sequences = [dict(s) for s in sequences]
+    keys = _SETTINGS
+    unknown = sorted(set(settings) - keys)
+    if unknown:
+        raise ValueError(f"render: unknown setting(s) {', '.join(unknown)}; known: {', '.join(sorted(keys))}")
+    names: set[str] = set()
     for index, seq in enumerate(sequences):
         if "name" not in seq or "seed" not in seq:
             raise ValueError(f"render.sequences[{index}] needs a name and a seed; got {seq}")
-        merged = {**settings, **seq}
         where = f"sequence {seq['name']!r}"
+        unknown = sorted(set(seq) - keys - {"name", "seed"})
+        if unknown:
+            raise ValueError(f"render.sequences[{index}] ({where}): unknown key(s) {', '.join(unknown)}")
+        if seq["name"] in names:
+            raise ValueError(f"render.sequences[{index}]: {where} appears twice (one folder each)")
+        names.add(seq["name"])
+        merged = {**settings, **seq}
         check_scene(merged.get("scene"), merged.get("camera", "auto"), merged.get("lighting", "auto"), where=where)
     columns = (
         TextColumn("[bold]{task.description}"),
