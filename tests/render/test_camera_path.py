@@ -53,6 +53,15 @@ def test_a_fly_through_walks_at_eye_height_through_the_free_space_of_a_room():
     assert again.to_dict() == path.to_dict() != other.to_dict()
 
 
+def test_a_fly_through_in_centimetres_walks_at_the_same_eye_height_in_metres():
+    room = Boxes(*[(100 * np.array(lo), 100 * np.array(hi), inside) for lo, hi, inside in ROOM.boxes])
+    metres, poses_m, _ = fit_camera("fly", 3, *ROOM.bounds(), ROOM, frames=20, aspect=1.5)
+    path, poses, _ = fit_camera("fly", 3, *room.bounds(), room, frames=20, aspect=1.5, eye_height=100 * EYE_HEIGHT)
+    assert path.eye == pytest.approx(100 * metres.eye)
+    for frame, pose in poses.items():
+        np.testing.assert_allclose(pose[:3, 3], 100 * poses_m[frame][:3, 3], atol=1e-3)  # waypoints: 6 decimals
+
+
 def test_an_orbit_circles_outside_the_scene_looking_at_it():
     path, poses, _ = fit_camera("orbit", 0, *YARD.bounds(), YARD, frames=30, aspect=1.5)
     eyes = np.array([pose[:3, 3] for pose in poses.values()])

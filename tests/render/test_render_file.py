@@ -315,14 +315,18 @@ def test_g_buffers_see_through_the_cut_out_parts_of_a_material(cutout):
     np.testing.assert_allclose(base[(slice(None), *right)].reshape(3, -1).T, [[0.9, 0.1, 0.1]] * 56, atol=1e-4)
 
 
-def test_a_fly_through_stays_inside_a_room_at_eye_height(tmp_path):
-    """Blender's ray casts find the floor, the head room and the walls of a closed room (planes facing in)."""
+@pytest.mark.parametrize("unit", [1.0, 0.01], ids=["metres", "centimetres"])
+def test_a_fly_through_stays_inside_a_room_at_eye_height(tmp_path, unit):
+    """Blender's ray casts find the floor, the head room and the walls of a closed room (planes facing in); a
+    room modelled in centimetres (unit scale 0.01) is walked at the same eye height in metres."""
     import bpy
 
     from wdss.render.camera_path import EYE_HEIGHT
     from wdss.render.scene_file import FileScene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.context.scene.unit_settings.scale_length = unit
+    k = 1.0 / unit  # scene units per metre
     for location, rotation in (
         ((0, 0, 0), (0, 0, 0)),  # floor
         ((0, 0, 3), (math.pi, 0, 0)),  # ceiling
@@ -331,12 +335,12 @@ def test_a_fly_through_stays_inside_a_room_at_eye_height(tmp_path):
         ((4, 0, 1.5), (0, -math.pi / 2, 0)),
         ((-4, 0, 1.5), (0, math.pi / 2, 0)),
     ):
-        bpy.ops.mesh.primitive_plane_add(size=8.0, location=location, rotation=rotation)
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, 0.5))  # a crate in the middle
+        bpy.ops.mesh.primitive_plane_add(size=8.0 * k, location=[k * c for c in location], rotation=rotation)
+    bpy.ops.mesh.primitive_cube_add(size=1.0 * k, location=(0.0, 0.0, 0.5 * k))  # a crate in the middle
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "room.blend"))
     scene = FileScene(tmp_path / "room.blend", seed=3, frames=30, resolution=SIZE, camera="fly", lighting="file")
     assert scene.description["camera"]["mode"] == "fly"
-    eyes = np.array([pose[:3, 3] for pose in scene.poses.values()])
+    eyes = np.array([pose[:3, 3] for pose in scene.poses.values()]) / k
     assert np.all(np.abs(eyes[:, :2]) < 4.0 - 0.2)
     assert not np.any(np.all(np.abs(eyes[:, :2]) < 0.5 + 0.2, axis=1))  # not through the crate
     np.testing.assert_allclose(eyes[:, 2], EYE_HEIGHT, atol=0.05)
@@ -410,3 +414,26 @@ def test_a_blend_files_own_sample_settings_do_not_override_the_configured_sample
     loaded = FileScene(path, seed=0, frames=2, resolution=SIZE, samples=3).scene
     assert loaded.view_layers[0].samples == 0 and loaded.cycles.time_limit == 0.0
     assert not loaded.cycles.use_sample_subset and not loaded.render.use_multiview
+
+
+def test_a_blend_files_scripts_and_python_drivers_never_run(tmp_path):
+    """A scene file is data: a registered text block (run on load when scripts are trusted) and a Python driver
+    expression would each leave a file behind."""
+    import bpy
+
+    from wdss.render.scene_file import FileScene
+
+    build_scene(tmp_path)
+    marker_text, marker_driver = tmp_path / "text_ran", tmp_path / "driver_ran"
+    text = bpy.data.texts.new("evil.py")
+    text.write(f"import pathlib\npathlib.Path({str(marker_text)!r}).touch()\n")
+    text.use_module = True
+    driver = bpy.data.objects["Sphere"].driver_add("scale", 0).driver
+    driver.type = "SCRIPTED"
+    driver.expression = f"__import__('pathlib').Path({str(marker_driver)!r}).touch() or 1.0"
+    path = tmp_path / "evil.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    assert not marker_text.exists() and not marker_driver.exists()
+    scene = FileScene(path, seed=0, frames=2, resolution=SIZE, lighting="file")
+    scene.scene.frame_set(scene.offset + 1)
+    assert not marker_text.exists() and not marker_driver.exists()

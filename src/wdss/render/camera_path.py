@@ -37,7 +37,7 @@ CAMERA_MODES = ("orbit", "fly")
 MAX_SKY_FRAMES = 3  # consecutive frames that may look at (nearly) nothing but sky
 MIN_HIT_SHARE = 0.1  # of the view rays that must hit geometry for a frame not to count as sky
 ATTEMPTS = 24  # candidate paths tried before giving up
-EYE_HEIGHT = 1.7  # scene units (metres in glTF): eye height of a fly-through, at most 0.6 x the scene's height
+EYE_HEIGHT = 1.7  # metres: eye height of a fly-through (at most 0.6 x the scene's height); fit_camera's eye_height
 NO_STANDING_POINT = "no floor with head room found"
 PROCEDURAL_EXTENT = 7.0  # objects of the procedural scenes lie within this radius: the orbit's unit scene
 
@@ -273,10 +273,18 @@ def _clear(ray_cast: RayCast, a: np.ndarray, b: np.ndarray, margin: float) -> bo
     return bool((distances > length + margin).all())
 
 
-def fly_path(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, ray_cast: RayCast, frames: int) -> FlyPath | str:
-    """A seeded eye-height walk through free space long enough for ``frames`` frames, or why there is none."""
+def fly_path(
+    rng: np.random.Generator,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    ray_cast: RayCast,
+    frames: int,
+    eye_height: float = EYE_HEIGHT,
+) -> FlyPath | str:
+    """A seeded walk at ``eye_height`` (scene units) through free space long enough for ``frames`` frames, or why
+    there is none."""
     size = hi - lo
-    eye = min(EYE_HEIGHT, 0.6 * float(size[2])) if size[2] > 0 else EYE_HEIGHT
+    eye = min(eye_height, 0.6 * float(size[2])) if size[2] > 0 else eye_height
     clearance = 0.25 * eye
     speed = eye * float(rng.uniform(0.025, 0.09))
     speed_wobble, wobble_period = float(rng.uniform(0.0, 0.8)), float(rng.uniform(12.0, 40.0))
@@ -360,10 +368,11 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def fit_camera(
-    mode: str, seed: int, lo, hi, ray_cast: RayCast, frames: int, aspect: float
+    mode: str, seed: int, lo, hi, ray_cast: RayCast, frames: int, aspect: float, *, eye_height: float = EYE_HEIGHT
 ) -> tuple[OrbitPath | FlyPath, dict[int, np.ndarray], int]:
     """The first of :data:`ATTEMPTS` seeded ``mode`` paths (``orbit`` or ``fly``) whose poses of frames
     ``-1..frames+1`` pass :func:`check_poses`; returns the path, those poses and the attempt's index.
+    ``eye_height``: a fly-through's, in scene units (:data:`EYE_HEIGHT` metres in a scene measured in metres).
 
     Raises ``ValueError`` with the last reason when none passes.
     """
@@ -373,7 +382,7 @@ def fit_camera(
     rng = np.random.default_rng([seed, 16])
     reason = ""
     for attempt in range(ATTEMPTS):
-        path = orbit_path(rng, lo, hi) if mode == "orbit" else fly_path(rng, lo, hi, ray_cast, frames)
+        path = orbit_path(rng, lo, hi) if mode == "orbit" else fly_path(rng, lo, hi, ray_cast, frames, eye_height)
         if isinstance(path, str):
             reason = path
             if reason.startswith(NO_STANDING_POINT):  # the scene has no floor with head room: no retry finds one

@@ -346,7 +346,7 @@ class FileScene:
         import bpy
         from mathutils import Matrix
 
-        from wdss.render.camera_path import fit_camera
+        from wdss.render.camera_path import EYE_HEIGHT, fit_camera
 
         scene = self.scene
         own = self._file_camera()
@@ -379,7 +379,9 @@ class FileScene:
         scene.collection.objects.link(obj)
         scene.camera = obj
         try:
-            path, poses, attempt = fit_camera(mode, seed, lo, hi, self._ray_caster(), frames, width / height)
+            path, poses, attempt = fit_camera(
+                mode, seed, lo, hi, self._ray_caster(), frames, width / height, eye_height=EYE_HEIGHT / self._metres()
+            )
         except ValueError as err:
             hint = "camera=fly walks through interiors" if mode == "orbit" else "camera=orbit circles the scene"
             raise ValueError(f"{where}: render.camera={mode}: {err}; {hint}") from err
@@ -390,6 +392,12 @@ class FileScene:
             obj.keyframe_insert("rotation_euler", frame=self.offset + f)
         self.poses = self._evaluated_poses(obj, frames)
         return mode, {"object": None, "attempt": attempt, "path": path.to_dict()}
+
+    def _metres(self) -> float:
+        """Metres per scene unit: a ``.blend``'s unit scale (Scene > Units; e.g. 0.01 for a scene modelled in
+        centimetres), 1 for a glTF (metres by its specification) or a scene without a unit system."""
+        units = self.scene.unit_settings
+        return float(units.scale_length) if units.system != "NONE" and units.scale_length > 0 else 1.0
 
     def _pinhole(self, obj, frames: int, width: int, height: int, where: str) -> float:
         """Make the file's camera a 36 mm-sensor pinhole with the same horizontal field of view at
