@@ -1,11 +1,14 @@
 """Scenes from files (``render.scene=path.{glb,gltf,blend}``): checked, loaded into Blender, lit, framed.
 
 * Checks before anything is created (:func:`check_scene`): the extension is one of :data:`SCENE_KINDS`, the
-  file exists, ``camera`` is one of :data:`CAMERAS` and ``lighting`` one of :data:`LIGHTINGS`; loading then
-  refuses a file with no geometry to render. Errors name the config key, the sequence and the file.
+  file exists and so does every external buffer and image a glTF references (:func:`scene_resources`),
+  ``camera`` is one of :data:`CAMERAS` and ``lighting`` one of :data:`LIGHTINGS`; loading then refuses a file
+  with no geometry to render. Errors name the config key, the sequence and the file. :func:`file_digest`
+  covers the file and those resources (a resumed render refuses a changed scene).
 * Loading uses Blender's own readers: the glTF 2.0 importer into an empty scene, or ``.blend`` opened as it
   is (its active scene and view layer; other view layers, compositing and the sequencer off), with Python in
-  the file never run (``use_scripts=False``, auto-execution off): a scene file is data.
+  the file never run (``use_scripts=False``, auto-execution off): a scene file is data. The viewport is made
+  to show what renders, since the geometry, its bounds and the ray casts come from the viewport's depsgraph.
 * The file's materials, lights and cameras are kept; :func:`wdss.render.materials.wire_aovs` sends each
   material's base colour, roughness and metallic to the AOVs (fallbacks recorded in the sidecar).
 * Lighting (``lighting``): ``auto`` keeps the file's when it has a light or a world with an environment or
@@ -15,7 +18,8 @@
   animated; ``orbit`` and ``fly`` fit a seeded path to the scene's bounds
   (:mod:`wdss.render.camera_path`); ``auto`` is ``file`` when the file's camera moves, else ``orbit``. The
   file's camera is made a pinhole with Blender's default 36 mm sensor (same field of view at the rendered
-  size, no lens shift, no depth of field), so one ``intrinsics`` entry describes every frame.
+  size, no lens shift, no depth of field, its lens, sensor and shift no longer keyed or driven), so one
+  ``intrinsics`` entry describes every frame.
 * Frame 0 of the sequence is the file's first frame: the ``.blend`` scene's start frame, or a glTF's
   earliest keyframe (0 without animation). A glTF's animated objects all play, each its first animation.
 """
