@@ -404,7 +404,7 @@ def test_objects_hidden_in_the_viewport_but_rendered_are_framed_and_wired(tmp_pa
     assert distances[0] == pytest.approx(4.5) and np.isinf(distances[1])
 
 
-def test_a_blend_files_own_sample_settings_do_not_override_the_configured_samples(tmp_path):
+def test_a_blend_files_own_render_settings_do_not_override_wdss_s(tmp_path):
     import bpy
 
     from wdss.render.scene_file import FileScene
@@ -414,11 +414,21 @@ def test_a_blend_files_own_sample_settings_do_not_override_the_configured_sample
     scene.view_layers[0].samples = 512  # a view layer's sample override
     scene.cycles.time_limit, scene.cycles.use_sample_subset = 0.5, True
     scene.render.use_multiview = True
+    scene.render.threads_mode, scene.render.threads = "FIXED", 1
+    aov = scene.view_layers[0].aovs.add()
+    aov.name, aov.type = "basecolor", "VALUE"  # one channel where wdss reads three
     path = tmp_path / "samples.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     loaded = FileScene(path, seed=0, frames=2, resolution=SIZE, samples=3).scene
-    assert loaded.view_layers[0].samples == 0 and loaded.cycles.time_limit == 0.0
+    layer = loaded.view_layers[0]
+    assert layer.samples == 0 and loaded.cycles.time_limit == 0.0
     assert not loaded.cycles.use_sample_subset and not loaded.render.use_multiview
+    assert loaded.render.threads_mode == "AUTO"  # threads=0: all cores
+    assert [(a.name, a.type) for a in layer.aovs] == [
+        ("basecolor", "COLOR"),
+        ("roughness", "VALUE"),
+        ("metallic", "VALUE"),
+    ]
 
 
 def test_a_blend_files_scripts_and_python_drivers_never_run(tmp_path):

@@ -208,14 +208,15 @@ def configure_cycles(scene, layer, *, seed: int, threads: int = 0) -> None:
     if threads:
         scene.render.threads_mode = "FIXED"
         scene.render.threads = threads
+    else:  # all cores, whatever a .blend fixed
+        scene.render.threads_mode = "AUTO"
     scene.render.film_transparent = False
     for flag in ("use_pass_combined", "use_pass_z", "use_pass_normal", "use_pass_vector", "use_pass_position"):
         setattr(layer, flag, True)
-    present = {aov.name for aov in layer.aovs}
+    present = {aov.name: aov for aov in layer.aovs}
     for name, kind in AOVS:
-        if name not in present:
-            aov = layer.aovs.add()
-            aov.name, aov.type = name, kind
+        aov = present.get(name) or layer.aovs.add()
+        aov.name, aov.type = name, kind  # a .blend's own AOV of the same name may be of the other type
     image = scene.render.image_settings
     image.media_type = "MULTI_LAYER_IMAGE"
     image.file_format = "OPEN_EXR_MULTILAYER"
