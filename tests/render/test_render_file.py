@@ -377,6 +377,15 @@ def test_a_file_cameras_own_sensor_and_keyed_lens_render_as_the_recorded_intrins
         projection = camera.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=SIZE[0], y=SIZE[1])
         assert projection[0][0] * SIZE[0] / 2 == pytest.approx(fx, rel=1e-5), frame
         assert projection[0][2] == pytest.approx(0.0, abs=1e-6) and camera.data.shift_x == 0.0, frame
+    # A zoom is refused, naming the camera: one intrinsics entry describes every frame.
+    bpy = build_scene(tmp_path)
+    data = bpy.context.scene.camera.data
+    for frame, lens in ((0, 35.0), (3, 50.0)):
+        data.lens = lens
+        data.keyframe_insert("lens", frame=frame)
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    with pytest.raises(ValueError, match=r"zoom\.blend: camera 'camera' zooms"):
+        FileScene(path, seed=0, frames=2, resolution=SIZE, camera="file")
 
 
 def test_objects_hidden_in_the_viewport_but_rendered_are_framed_and_wired(tmp_path):

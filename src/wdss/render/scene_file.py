@@ -181,7 +181,7 @@ class FileScene:
         layer = bpy.context.view_layer
         self._show_what_renders(layer)
         played = self._play_gltf_animations() if self.kind == "gltf" else None
-        self.offset = self._first_frame()
+        self.offset, self.last = self._animation_range()
         scene.frame_set(self.offset)
         geometry, bounds = self._geometry()
         if bounds is None:
@@ -261,21 +261,25 @@ class FileScene:
             if obj.name in layer.objects:
                 obj.hide_set(False, view_layer=layer)
 
-    def _first_frame(self) -> int:
+    def _animation_range(self) -> tuple[int, int]:
+        """The file's first and last frames: the ``.blend`` scene's, or a glTF's first and last keyframes."""
         import bpy
 
         if self.kind == "blend":
-            return int(self.scene.frame_start)
-        starts = [action.frame_range[0] for action in bpy.data.actions]
-        return int(np.floor(min(starts))) if starts else 0
+            return int(self.scene.frame_start), int(self.scene.frame_end)
+        ranges = [action.frame_range for action in bpy.data.actions]
+        if not ranges:
+            return 0, 0
+        return int(np.floor(min(r[0] for r in ranges))), int(np.ceil(max(r[1] for r in ranges)))
 
-    def _last_frame(self) -> int:
-        import bpy
-
-        if self.kind == "blend":
-            return int(self.scene.frame_end)
-        ends = [action.frame_range[1] for action in bpy.data.actions]
-        return int(np.ceil(max(ends))) if ends else self.offset
+    def _each_frame(self, frames: int):
+        """Frames ``-1..frames+1`` of the sequence, each set in turn; back at frame 0 after the last."""
+        try:
+            for f in range(-1, frames + 2):
+                self.scene.frame_set(self.offset + f)
+                yield f
+        finally:
+            self.scene.frame_set(self.offset)
 
     @staticmethod
     def _geometry() -> tuple[list[Any], tuple[np.ndarray, np.ndarray] | None]:
@@ -339,12 +343,7 @@ class FileScene:
         return cameras[0] if cameras else None
 
     def _evaluated_poses(self, obj, frames: int) -> dict[int, np.ndarray]:
-        poses = {}
-        for f in range(-1, frames + 2):
-            self.scene.frame_set(self.offset + f)
-            poses[f] = _orthonormal(np.array(obj.matrix_world))
-        self.scene.frame_set(self.offset)
-        return poses
+        return {f: _orthonormal(np.array(obj.matrix_world)) for f in self._each_frame(frames)}
 
     def _frame(self, camera, seed, frames, lo, hi, width, height, where) -> tuple[str, dict[str, Any]]:
         import bpy
@@ -366,13 +365,13 @@ class FileScene:
             self.lens = self._pinhole(own, frames, width, height, where)
             self.poses = file_poses
             scene.camera = own
-            if self.offset + frames > self._last_frame():
+            if self.offset + frames > self.last:
                 log.warning(
                     "%s: frames %d..%d go beyond the file's animation (last frame %d): the camera holds still there",
                     where,
                     self.offset,
                     self.offset + frames,
-                    self._last_frame(),
+                    self.last,
                 )
             return mode, {"object": own.name, "moving": moving}
         data = bpy.data.cameras.new("wdss_camera")
@@ -411,14 +410,11 @@ class FileScene:
         data = obj.data
         if data.type != "PERSP":
             raise ValueError(f"{where}: camera {obj.name!r} is {data.type}; wdss renders perspective cameras")
-        scene = self.scene
         depsgraph = bpy.context.evaluated_depsgraph_get()
-        focals = set()
-        for f in range(-1, frames + 2):
-            scene.frame_set(self.offset + f)
-            projection = obj.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=width, y=height)
-            focals.add(round(projection[0][0] * width / 2, 4))
-        scene.frame_set(self.offset)
+        focals = {
+            round(obj.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=width, y=height)[0][0] * width / 2, 4)
+            for _ in self._each_frame(frames)
+        }
         if len(focals) > 1:
             raise ValueError(f"{where}: camera {obj.name!r} zooms (its focal length is animated); use camera=orbit")
         if data.shift_x or data.shift_y:
