@@ -233,3 +233,15 @@ def test_lightning_builds_raw_batches_in_the_datamodules_hook(tmp_path):
     trainer.fit(Probe(), datamodule=dm)
     assert isinstance(next(iter(dm.train_dataloader())), RawBatch)
     assert len(seen) == 1 and seen[0]["history"].shape == (2, 3, 24, 24) and seen[0]["target"].dtype == torch.float32
+
+
+def test_a_zipped_sequence_packs_like_its_folder(tmp_path):
+    path = write_sequence(tmp_path / "scenes" / "seq", frames=(1, 2), size=(16, 24), scales=(2,), cameras=True)
+    shutil.make_archive(str(tmp_path / "zipped" / "seq"), "zip", root_dir=tmp_path / "scenes", base_dir="seq")
+    folder, zipped = (pack_sequence(Sequence(p), tmp_path / f"{p.name}.packed", verify=None)
+                      for p in (path, tmp_path / "zipped" / "seq.zip"))  # fmt: skip
+    assert zipped.index["zip_prefix"] == "seq/" and zipped.stale() is None and zipped.camera(1) is not None
+    for frame in (1, 2):
+        for height in (16, 8):
+            a, b = (s.read(frame, height, ["color", "motion", "depth"]) for s in (folder, zipped))
+            assert all(np.array_equal(a[k], b[k]) for k in a)

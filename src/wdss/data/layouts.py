@@ -124,6 +124,11 @@ class Source:
     def _has_resolution_dirs(names: list[str]) -> bool:
         return any(re.fullmatch(r"(?:(?:GBuffer|Nojitter)-)?\d+P", n.split("/", 1)[0]) for n in names if "/" in n)
 
+    @property
+    def prefix(self) -> str:
+        """The top folder a zip keeps the sequence's files under ("" for a folder or a flat zip)."""
+        return self._prefix
+
     def describe(self, name: str) -> str:
         return f"{self.path}/{name}" if self.path.is_dir() else f"{self.path}:{self._prefix}{name}"
 

@@ -217,7 +217,7 @@ def pack_sequence(
     else:
         folder.mkdir(parents=True, exist_ok=True)
         index = {"format": FORMAT, "version": VERSION, "sequence": seq.name, "layout": seq.layout.name}
-        index |= {"source": str(source), "zip_prefix": getattr(seq.source, "_prefix", ""), **settings}
+        index |= {"source": str(source), "zip_prefix": seq.source.prefix, **settings}
         index |= {"exposure": _exposure(seq), "complete": False, "resolutions": {}}
     index["complete"] = False
     if seq.source.has("sequence.json"):
