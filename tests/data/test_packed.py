@@ -224,8 +224,8 @@ def test_lightning_builds_raw_batches_in_the_datamodules_hook(tmp_path):
         def configure_optimizers(self):
             return torch.optim.SGD(self.parameters(), lr=0.1)
 
-    dm = SceneDataModule(FIXTURES, SPLITS, ["history", "target", "brdf"], patch_size=24, batch_size=2,
-                         preprocess_on="device")  # fmt: skip
+    dm = SceneDataModule(FIXTURES, {"train": ["fixture_000"]}, ["history", "target", "brdf"], patch_size=24,
+                         batch_size=2, preprocess_on="device")  # fmt: skip
     trainer = L.Trainer(
         accelerator="cpu", fast_dev_run=1, logger=False, enable_checkpointing=False, enable_progress_bar=False,
         enable_model_summary=False, default_root_dir=tmp_path,
