@@ -41,6 +41,7 @@ from wdss.data.layouts import SceneError, Sequence
 from wdss.model.baselines import Upsample
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
+from wdss.progress import Progress
 from wdss.video import Mp4Writer, labelled
 
 __all__ = ["UpscaleError", "main", "output_name", "upscale"]
@@ -115,39 +116,6 @@ class Record:
         tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
         tmp.write_text(json.dumps({**self.identity, "frames": self.frames, "skipped": self.skipped}, indent=1))
         os.replace(tmp, self.path)
-
-
-class Progress:
-    """A rich progress bar on a terminal; one flushed line per frame otherwise (a pipe or log file shows no bar)."""
-
-    def __init__(self, label: str, total: int) -> None:
-        self.label, self.total, self.count = label, total, 0
-        self._bar = None
-        if sys.stdout.isatty():
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-            columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
-            self._bar = Progress(*columns)
-            self._task = self._bar.add_task(label, total=total)
-
-    def __enter__(self) -> Progress:
-        if self._bar is not None:
-            self._bar.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self._bar is not None:
-            self._bar.stop()
-
-    def done(self, text: str | None) -> None:
-        """One frame more: ``text`` describes it (None: a frame resumed from an earlier run, not shown)."""
-        self.count += 1
-        if self._bar is not None:
-            if text is not None:
-                self._bar.console.print(text)
-            self._bar.advance(self._task)
-        elif text is not None:
-            print(f"{self.label}: {self.count}/{self.total} {text}", flush=True)
 
 
 def _describe(values: dict[str, float]) -> str:
@@ -231,7 +199,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
     with Progress(f"upscale {seq.name} {scale:g}x", len(dataset)) as progress:
         for index, (_, frame) in enumerate(dataset.items):
             if frame in done:
-                progress.done(None)
+                progress.advance(text=None)
                 continue
             try:
                 batch = collate([dataset[index]])
@@ -240,7 +208,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
                     raise UpscaleError(f"frame {frame} cannot be read: {err} (on_error=skip goes on)") from err
                 record.skipped[str(frame)] = str(err)
                 record.save()
-                progress.done(f"frame {frame:04d} SKIPPED, it cannot be read: {err}")
+                progress.advance(text=f"frame {frame:04d} SKIPPED, it cannot be read: {err}")
                 continue
             batch = {k: v.to(device) if isinstance(v, Tensor) else v for k, v in batch.items()}
             if feed_back:
@@ -271,7 +239,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
             channels = seq.layout.SLOTS["color"].channels
             write_exr(files(frame)[0], dict(zip(channels, color[0].float().cpu().numpy(), strict=True)))
             previous = (frame, out["irradiance"])
-            progress.done(text)
+            progress.advance(text=text)
     if cfg.video:
         _video(out_dir, seq, scale, [files(f)[-1] for _, f in dataset.items if complete(f)], cfg.fps)
     return _summary(record, seq, scale, out_dir, [f for _, f in dataset.items])
