@@ -131,7 +131,7 @@ def bench_data(
 
     Table 1: samples/s of one worker (one thread) cutting ``patch``-sized patches for a temporal model's every
     buffer (all batch keys: current, previous and second previous frame, native LR), from zip EXR files (half) and
-    from packed stores (zstd tiles; untiled raw), with the per-pixel preprocessing in the worker (``loader``) or
+    from packed stores (lz4 and zstd tiles; untiled raw), with the per-pixel preprocessing in the worker (``loader``) or
     left to the device (``device``: the worker reads and stacks; the build then runs on the GPU, not timed here).
     Every source is timed in the same interleaved rounds (:func:`interleaved_ms`), ratios are medians of per-round
     ratios. The last column is samples/s over what a training step (``widths`` WDSS, batch ``batch``, forward and
@@ -158,7 +158,7 @@ def bench_data(
             root / "seq", frames=range(1, frames + 3), size=size, scales=(round(scale),), compression="zip", half=True
         )
         sources = {"EXR (zip, half)": Sequence(path)}
-        for label, codec in (("packed zstd", "zstd"), ("packed raw", "none")):
+        for label, codec in (("packed lz4", "lz4"), ("packed zstd", "zstd"), ("packed raw", "none")):
             store = Path(tmp) / f"{codec}.packed"
             sources[label] = pack_sequence(Sequence(path), store / "seq", codec=codec, verify=1)
         datasets = {

@@ -25,7 +25,9 @@ FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "rendered"
 SPLITS = {"train": ["fixture_000"], "val": ["fixture_000"], "test": ["fixture_000"]}
 
 
-@pytest.fixture(scope="module", params=[("zstd", 16), ("none", 0)], ids=["zstd-tiles", "none-whole"])
+@pytest.fixture(
+    scope="module", params=[("lz4", 16), ("zstd", 16), ("none", 0)], ids=["lz4-tiles", "zstd-tiles", "none-whole"]
+)
 def store(request, tmp_path_factory) -> Path:
     codec, tile = request.param
     out = tmp_path_factory.mktemp("packed") / "rendered.packed"
@@ -116,10 +118,11 @@ def test_a_patch_reads_only_its_tiles_and_history_from_outside_the_patch_is_kept
             torch.testing.assert_close(patch[key], full[key][..., y : y + size, x : x + size], rtol=1e-5, atol=1e-5)
 
 
-def test_a_corrupt_store_names_the_file_and_the_sequence(tmp_path):
+@pytest.mark.parametrize("codec", ["lz4", "zstd"])
+def test_a_corrupt_store_names_the_file_and_the_sequence(tmp_path, codec):
     path = write_sequence(tmp_path / "seq", frames=(1, 2), size=(16, 24), scales=(2,))
     folder = tmp_path / "packed" / "seq"
-    pack_sequence(Sequence(path), folder, tile=8, verify=0)
+    pack_sequence(Sequence(path), folder, codec=codec, tile=8, verify=0)
     hr = folder / "16P.bin"
     data = bytearray(hr.read_bytes())
     # A flipped byte inside a chunk: its checksum fails when that tile is read.

@@ -7,8 +7,10 @@ A packed store holds one folder per sequence, ``<store>/<sequence>/``:
   chunk, then the chunks: a ``(C, t, t)`` tile of one buffer (``t`` = ``tile``, smaller at the right and bottom
   edges; ``tile: 0``, the default without compression: the whole frame) in the buffer's dtype: float16 where every
   channel of the source was half, float32 otherwise. With ``codec: zstd`` a chunk is compressed with a content
-  checksum (a corrupt chunk fails to decode); with ``codec: none`` it is stored as is, and a window of an untiled
-  frame is one strided copy out of the memory map.
+  checksum (a corrupt chunk fails to decode); with ``codec: lz4`` (the default) a chunk is the CRC-32 of the rest
+  (4 bytes, little-endian), then an LZ4 block (high compression: ~1.2x the size of zip EXR files, decoded ~2.7x as
+  fast as zstd); with ``codec: none`` it is stored as is, and a window of an untiled frame is one strided copy out
+  of the memory map.
 * ``index.json``: format and version, the sequence's name, layout and source, codec and tile size, the sidecar's
   exposure, and per resolution: the file, the frame size, the frames, each buffer's dtype and source channels,
   and per packed frame its record's offset and length, the source files' sizes and CRC-32 (the zip format's
@@ -41,7 +43,8 @@ log = logging.getLogger(__name__)
 FORMAT = "wdss-packed"
 VERSION = 1
 INDEX = "index.json"
-CODECS = ("zstd", "none")
+CODECS = ("lz4", "zstd", "none")
+LEVELS = {"lz4": 9, "zstd": 3}  # the default compression level per codec (lz4: its high-compression levels, 3-12)
 DTYPES = ("float16", "float32")  # what a buffer is stored as: half where the source is half, float otherwise
 
 
@@ -241,6 +244,8 @@ class PackedSequence:
     def _decode(self, data: memoryview, size: int) -> bytes | memoryview:
         if self.codec == "none":
             return data
+        if self.codec == "lz4":
+            return lz4_decode(data, size)
         if self._decompressor is None:
             import zstandard
 
@@ -270,7 +275,10 @@ class PackedSequence:
         table = np.frombuffer(mm, dtype="<i8", count=len(names) * rows * cols * 2, offset=start)
         table = table.reshape(len(names), rows, cols, 2)[names.index(buffer)]
         rows_in, cols_in = range(y0 // t, (y1 - 1) // t + 1), range(x0 // t, (x1 - 1) // t + 1)
-        if len(rows_in) * len(cols_in) > 1 and rows_in.stop * t <= full_h and cols_in.stop * t <= full_w:
+        # Small tiles: one decode per tile into a grid, then one copy (per-tile numpy calls would dominate); from
+        # 128^2 on, each decoded tile is copied straight into the window (the grid's join and transpose cost more).
+        many = len(rows_in) * len(cols_in) > 1 and t < 128
+        if many and rows_in.stop * t <= full_h and cols_in.stop * t <= full_w:
             size = channels * t * t * dtype.itemsize
             window_table = table[rows_in.start : rows_in.stop, cols_in.start : cols_in.stop]
             grid = self._tile_grid(mm, window_table, start, length, table_bytes, size)
@@ -369,6 +377,24 @@ def changed_source(source: Path, prefix: str, recorded: dict[str, dict]) -> str 
         if info is None or info.file_size != meta["size"] or meta["crc32"] != info.CRC:
             return f"{source}:{prefix}{name} changed since it was packed"
     return None
+
+
+def lz4_encode(data: bytes, level: int) -> bytes:
+    """One lz4 chunk: the CRC-32 of the block (4 bytes, little-endian), then the LZ4 block (no size header)."""
+    import lz4.block
+
+    block = lz4.block.compress(data, mode="high_compression", compression=level, store_size=False)
+    return crc32(block).to_bytes(4, "little") + block
+
+
+def lz4_decode(data: memoryview, size: int) -> bytes:
+    """The ``size`` bytes of an lz4 chunk (:func:`lz4_encode`); a chunk whose checksum differs is a ValueError."""
+    import lz4.block
+
+    block = data[4:]
+    if len(data) < 4 or crc32(block) != int.from_bytes(data[:4], "little"):
+        raise ValueError("its CRC-32 differs")
+    return lz4.block.decompress(block, uncompressed_size=size)
 
 
 def crc32(data: bytes) -> int:
