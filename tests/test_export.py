@@ -22,6 +22,7 @@ CONFIGS = {
     "swt_rir": ["transform=swt", "basis=db4", "model.net.gbuffer_block=rir"],
     "fusion_ll": ["variant=fusion_ll"],
     "dfasr": ["variant=dfasr"],
+    "learned_bilateral": ["transform=swt", "basis=db4", "recipe.residual=learned_bilateral", "recipe.output_space=log"],
 }
 
 

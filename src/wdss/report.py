@@ -62,6 +62,7 @@ PAPER_LABELS = {
     "bilinear": "Bilinear",
     "bilinear_demodulated": "Bilinear (demod.)",
     "joint_bilateral": "Joint bilateral",
+    "learned_bilateral": "Learned bilateral",
     "real_esrgan": "Real-ESRGAN",
     "nsrr": "NSRR",
     "fusesr": "FuseSR",

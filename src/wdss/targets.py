@@ -29,6 +29,7 @@ ALLOWED: Mapping[str, tuple[str, ...]] = {
     "wdss.model.network": ("WDSSNet",),
     "wdss.model.baselines": ("Upsample",),
     "wdss.model.joint_bilateral": ("JointBilateralUpsample",),
+    "wdss.model.learned_bilateral": ("LearnedBilateralUpsample",),
     "wdss.model.rrdbnet": ("RRDBNet",),
     "wdss.model.nsrr": ("NSRR",),
     "wdss.model.fusesr": ("FuseSR",),

@@ -32,7 +32,7 @@ def test_a_residual_network_starts_as_its_upsampler(transform, basis, head, spac
     data = batch(size=size, scale=scale)
     bilinear = F.interpolate(data["lr"], size=size, mode="bilinear", align_corners=False)
     joint = joint_bilateral_upsample(data["lr"], data["gbuffer"])
-    for residual, expected in (("bilinear", bilinear), ("joint_bilateral", joint)):
+    for residual, expected in (("bilinear", bilinear), ("joint_bilateral", joint), ("learned_bilateral", joint)):
         for residual_input in (False, True):  # seeing the upsampled irradiance changes nothing at the start
             model = net(transform, basis, head, output_space=space, residual=residual, residual_input=residual_input)
             out = forward(model, data)

@@ -20,13 +20,22 @@ the floor; exp() of large arguments is slow). Neighbours outside the frame repea
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from typing import NamedTuple
 
 import torch
 from torch import Tensor, nn
 
 from wdss.data.sampling import point_sample
 
-__all__ = ["FALLBACK_WEIGHT", "JointBilateralUpsample", "joint_bilateral_upsample"]
+__all__ = [
+    "FALLBACK_WEIGHT",
+    "JointBilateralUpsample",
+    "Tap",
+    "joint_bilateral_upsample",
+    "neighbourhood",
+    "range_weight",
+]
 
 # Added to every range weight: negligible next to a similar neighbour (weight ~1), decisive when none is.
 FALLBACK_WEIGHT = 1e-6
@@ -34,8 +43,9 @@ FALLBACK_WEIGHT = 1e-6
 _MAX_EXPONENT = 30.0
 
 
-def _taps(hr: int, lr: int, radius: int, device: torch.device) -> list[tuple[Tensor, Tensor]]:
-    """Per tap offset along one axis: the clamped LR index and the tent weight of every HR position."""
+def _taps(hr: int, lr: int, radius: int, device: torch.device) -> list[tuple[Tensor, Tensor, Tensor]]:
+    """Per tap offset along one axis: the clamped LR index, the tent weight of every HR position, and the HR
+    position's offset from the tap in LR pixels (``u - j``, before clamping)."""
     # float64 positions: floor() must not flip at exact cell boundaries for any size.
     u = (torch.arange(hr, device=device, dtype=torch.float64) + 0.5) * (lr / hr) - 0.5
     base = torch.floor(u)
@@ -43,8 +53,71 @@ def _taps(hr: int, lr: int, radius: int, device: torch.device) -> list[tuple[Ten
     for k in range(1 - radius, radius + 1):
         j = base + k
         weight = (1.0 - (u - j).abs() / radius).clamp_min(0.0)
-        taps.append((j.long().clamp(0, lr - 1), weight))
+        taps.append((j.long().clamp(0, lr - 1), weight, u - j))
     return taps
+
+
+class Tap(NamedTuple):
+    """One LR neighbour of every HR pixel: its values, where it lies and how its guide differs."""
+
+    values: Tensor  # (N, C, H, W): the neighbour's LR values
+    spatial: Tensor  # (H, W): the tent weight
+    offset: tuple[Tensor, Tensor]  # (H,), (W,): the pixel's offset from the neighbour in LR pixels (rows, cols)
+    difference: Tensor  # (N, 7, H, W): HR guide minus the neighbour's, scaled by the ranges (albedo, depth, normal)
+
+
+def neighbourhood(
+    lr: Tensor,
+    gbuffer: Tensor,
+    *,
+    sigma_depth: float = 0.01,
+    sigma_normal: float = 0.1,
+    sigma_albedo: float = 0.1,
+    radius: int = 2,
+) -> Iterator[Tap]:
+    """The ``2 radius x 2 radius`` LR neighbours of every HR pixel of ``gbuffer``'s grid, one :class:`Tap` each.
+
+    The guide differences are scaled so that a range term is a plain squared distance: ``exp(-|difference|^2)``
+    is the module docstring's range weight.
+    """
+    if int(radius) != radius or radius < 1:
+        raise ValueError(f"radius must be a positive integer, got {radius}")
+    if min(sigma_depth, sigma_normal, sigma_albedo) <= 0:
+        raise ValueError("sigma_depth, sigma_normal and sigma_albedo must be positive")
+    if lr.shape[0] != gbuffer.shape[0] or gbuffer.shape[1] < 7:
+        raise ValueError(f"lr {tuple(lr.shape)} and gbuffer {tuple(gbuffer.shape)} do not form a batch")
+    radius = int(radius)
+    (h, w), (height, width) = lr.shape[-2:], gbuffer.shape[-2:]
+    guide = gbuffer[:, :7].to(lr.dtype)
+    lr_guide = point_sample(guide, (h, w))
+    scales = torch.tensor(
+        [1 / (math.sqrt(2) * sigma_albedo)] * 3
+        + [1 / (math.sqrt(2) * sigma_depth)]
+        + [1 / math.sqrt(2 * sigma_normal)] * 3,
+        dtype=lr.dtype,
+        device=lr.device,
+    ).view(1, 7, 1, 1)
+    guide, lr_guide = guide * scales, lr_guide * scales
+    source = torch.cat([lr, lr_guide], dim=1)  # gathered together: one index op per tap
+    channels = lr.shape[1]
+    rows, cols = _taps(height, h, radius, lr.device), _taps(width, w, radius, lr.device)
+    # Columns first, on the LR rows: the per-tap row gathers then copy whole contiguous rows, the cheap axis.
+    for col_index, col_weight, col_offset in cols:
+        source_cols = source.index_select(3, col_index)
+        for row_index, row_weight, row_offset in rows:
+            neighbour = source_cols.index_select(2, row_index)
+            yield Tap(
+                values=neighbour[:, :channels],
+                spatial=(row_weight[:, None] * col_weight[None, :]).to(lr.dtype),
+                offset=(row_offset.to(lr.dtype), col_offset.to(lr.dtype)),
+                difference=guide - neighbour[:, channels:],
+            )
+
+
+def range_weight(tap: Tap) -> Tensor:
+    """The joint-bilateral weight of a tap (tent times range term plus the fallback floor), (N, 1, H, W)."""
+    distance = (tap.difference * tap.difference).sum(1, keepdim=True).clamp_max(_MAX_EXPONENT)
+    return tap.spatial * (torch.exp(-distance) + FALLBACK_WEIGHT)
 
 
 def joint_bilateral_upsample(
@@ -61,42 +134,16 @@ def joint_bilateral_upsample(
     See the module docstring for the weights. Returns (N, C, H, W) in ``lr``'s dtype; a convex combination of
     ``lr`` values, so non-negative input stays non-negative.
     """
-    if int(radius) != radius or radius < 1:
-        raise ValueError(f"radius must be a positive integer, got {radius}")
-    if min(sigma_depth, sigma_normal, sigma_albedo) <= 0:
-        raise ValueError("sigma_depth, sigma_normal and sigma_albedo must be positive")
-    if lr.shape[0] != gbuffer.shape[0] or gbuffer.shape[1] < 7:
-        raise ValueError(f"lr {tuple(lr.shape)} and gbuffer {tuple(gbuffer.shape)} do not form a batch")
-    radius = int(radius)
-    (h, w), (height, width) = lr.shape[-2:], gbuffer.shape[-2:]
-    guide = gbuffer[:, :7].to(lr.dtype)
-    lr_guide = point_sample(guide, (h, w))
-    # Scaled guides turn each range term into a plain squared distance: exponent = -|g - g'|^2 summed.
-    scales = torch.tensor(
-        [1 / (math.sqrt(2) * sigma_albedo)] * 3
-        + [1 / (math.sqrt(2) * sigma_depth)]
-        + [1 / math.sqrt(2 * sigma_normal)] * 3,
-        dtype=lr.dtype,
-        device=lr.device,
-    ).view(1, 7, 1, 1)
-    guide, lr_guide = guide * scales, lr_guide * scales
-    source = torch.cat([lr, lr_guide], dim=1)  # gathered together: one index op per tap
-    channels = lr.shape[1]
-
-    rows, cols = _taps(height, h, radius, lr.device), _taps(width, w, radius, lr.device)
+    height, width = gbuffer.shape[-2:]
     total = lr.new_zeros(lr.shape[0], 1, height, width)
-    accumulated = lr.new_zeros(lr.shape[0], channels, height, width)
-    # Columns first, on the LR rows: the per-tap row gathers then copy whole contiguous rows, the cheap axis.
-    for col_index, col_weight in cols:
-        source_cols = source.index_select(3, col_index)
-        for row_index, row_weight in rows:
-            neighbour = source_cols.index_select(2, row_index)
-            spatial = (row_weight[:, None] * col_weight[None, :]).to(lr.dtype)
-            difference = guide - neighbour[:, channels:]
-            distance = (difference * difference).sum(1, keepdim=True).clamp_max(_MAX_EXPONENT)
-            weight = spatial * (torch.exp(-distance) + FALLBACK_WEIGHT)
-            accumulated = accumulated + weight * neighbour[:, :channels]
-            total = total + weight
+    accumulated = lr.new_zeros(lr.shape[0], lr.shape[1], height, width)
+    taps = neighbourhood(
+        lr, gbuffer, sigma_depth=sigma_depth, sigma_normal=sigma_normal, sigma_albedo=sigma_albedo, radius=radius
+    )
+    for tap in taps:
+        weight = range_weight(tap)
+        accumulated = accumulated + weight * tap.values
+        total = total + weight
     # The spatial weights of the taps sum to radius^2 > 0, so total >= FALLBACK_WEIGHT * radius^2.
     return accumulated / total
 

@@ -24,6 +24,7 @@ from torch import Tensor, nn
 
 from wdss.model.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3
 from wdss.model.joint_bilateral import joint_bilateral_upsample
+from wdss.model.learned_bilateral import LearnedBilateralUpsample
 from wdss.wavelets import WaveletTransform
 
 __all__ = ["HEADS", "OUTPUT_SPACES", "RESIDUALS", "WIDTHS", "WDSSNet"]
@@ -31,8 +32,9 @@ __all__ = ["HEADS", "OUTPUT_SPACES", "RESIDUALS", "WIDTHS", "WDSSNet"]
 HEADS = ("shared_inr", "multi_inr", "fusion_ll")
 # What the head's coefficients (or image, for transform=none) represent: irradiance (the paper) or log1p of it.
 OUTPUT_SPACES = ("linear", "log")
-# What the head adds its prediction to: nothing (the paper), or the LR irradiance upsampled by a fixed method.
-RESIDUALS = ("none", "bilinear", "joint_bilateral")
+# What the head adds its prediction to: nothing (the paper), or the LR irradiance upsampled by a fixed method or by
+# joint bilateral upsampling with learned tap weights (trained with the network, starting as joint bilateral).
+RESIDUALS = ("none", "bilinear", "joint_bilateral", "learned_bilateral")
 # Width presets besides the paper's defaults (conf/size/small.yaml mirrors "small"): "small" trains in minutes
 # on 2 CPU cores; "tiny" is for tests and stability checks.
 WIDTHS: dict[str, dict] = {
@@ -276,9 +278,11 @@ class WDSSNet(nn.Module):
         if residual not in RESIDUALS:
             raise ValueError(f"model.residual must be one of {', '.join(RESIDUALS)}, got {residual!r}")
         self.output_space, self.residual = output_space, residual
+        self.upsampler = LearnedBilateralUpsample() if residual == "learned_bilateral" else None
         if residual_input and residual == "none":
             raise ValueError(
-                "model.residual_input needs a residual upsampler (model.residual: bilinear or joint_bilateral)"
+                "model.residual_input needs a residual upsampler (model.residual: bilinear, joint_bilateral or "
+                "learned_bilateral)"
             )
         # The G-buffer branch also sees the upsampled irradiance the head corrects: the correction depends on where
         # that upsampling errs, which the network cannot see from the LR and G-buffers alone.
@@ -418,6 +422,8 @@ class WDSSNet(nn.Module):
             return None
         if self.residual == "bilinear":
             return F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
+        if self.upsampler is not None:
+            return self.upsampler.upsample(lr, gbuffer)
         return joint_bilateral_upsample(lr.float(), gbuffer.float())
 
     def target_coefficients(self, irradiance: Tensor) -> Tensor | None:

@@ -1,0 +1,113 @@
+"""Learned joint bilateral upsampling: the joint-bilateral kernel with a learned correction of every tap's weight.
+
+Each high-resolution pixel takes a convex combination of its ``2 radius x 2 radius`` low-resolution neighbours
+(:func:`wdss.model.joint_bilateral.neighbourhood`), weighted by ``softmax(log w_jbu + c)``: ``w_jbu`` is the fixed
+joint-bilateral weight (tent times range term) and ``c`` a logit predicted per pixel and tap by a small MLP of
+1x1 convolutions from what tells the taps apart -- the scaled guide differences (albedo, depth, normal) and their
+magnitudes, the pixel's offset from the tap, the tent weight, and how far the tap's log irradiance lies from the
+joint-bilateral estimate (optionally also a few convolutional features of the G-buffer around the pixel; off by
+default: on data/mini they fit the training scenes and generalise worse). The MLP's last layer starts at zero,
+so the module starts as joint bilateral upsampling exactly and learns from there.
+
+Why: at CPU scale the WDSS network barely leaves its starting point in a few hundred steps, while this kernel
+(625 parameters) learns a correction that generalises to unseen scenes within a hundred (README, "where
+CPU models stand"). It is the residual base ``recipe.residual=learned_bilateral`` of the network and a model of
+its own (``model=learned_bilateral``), so the two contributions are separate ablation rows.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from wdss.model.joint_bilateral import joint_bilateral_upsample, neighbourhood, range_weight
+
+__all__ = ["LearnedBilateralUpsample"]
+
+GBUFFER_CHANNELS = 11  # wdss.data.GBUFFER_STACK
+# Scaled guide differences beyond this many range widths all mean "a different surface": clamped, so that the
+# MLP sees bounded inputs (the fixed range weight, exp(-25), already excludes such a tap).
+_DIFFERENCE_LIMIT = 5.0
+# Learned logits are bounded: a tap's weight changes by at most e^8 either way, so the kernel stays a smooth
+# reweighting of joint bilateral upsampling and never divides by a vanishing total.
+_LOGIT_LIMIT = 8.0
+
+
+class LearnedBilateralUpsample(nn.Module):
+    """Joint bilateral upsampling of ``lr`` guided by ``gbuffer`` with learned per-tap weight corrections.
+
+    ``hidden``: width of the per-tap MLP (two hidden 1x1 layers); ``context``: channels of the G-buffer context
+    features (two 3x3 convolutions at full resolution; 0, the default: none). The sigmas and radius are those of
+    the fixed kernel it starts from (:func:`~wdss.model.joint_bilateral.joint_bilateral_upsample`).
+    """
+
+    def __init__(
+        self,
+        hidden: int = 16,
+        context: int = 0,
+        sigma_depth: float = 0.01,
+        sigma_normal: float = 0.1,
+        sigma_albedo: float = 0.1,
+        radius: int = 2,
+    ) -> None:
+        super().__init__()
+        if hidden < 1 or context < 0:
+            raise ValueError(f"hidden must be >= 1 and context >= 0, got hidden={hidden}, context={context}")
+        if int(radius) != radius or radius < 1:
+            raise ValueError(f"radius must be a positive integer, got {radius}")
+        if min(sigma_depth, sigma_normal, sigma_albedo) <= 0:
+            raise ValueError("sigma_depth, sigma_normal and sigma_albedo must be positive")
+        self.ranges = dict(sigma_depth=sigma_depth, sigma_normal=sigma_normal, sigma_albedo=sigma_albedo, radius=radius)
+        self.context = (
+            nn.Sequential(
+                nn.Conv2d(GBUFFER_CHANNELS, context, 3, padding=1), nn.ReLU(),
+                nn.Conv2d(context, context, 3, padding=1), nn.ReLU(),
+            )
+            if context
+            else None
+        )  # fmt: skip
+        features = 7 + 7 + 2 + 1 + 3 + context  # difference, |difference|, offset, tent, log deviation, context
+        self.mlp = nn.Sequential(
+            nn.Conv2d(features, hidden, 1), nn.ReLU(), nn.Conv2d(hidden, hidden, 1), nn.ReLU(), nn.Conv2d(hidden, 1, 1)
+        )
+        nn.init.zeros_(self.mlp[-1].weight)  # start exactly at joint bilateral upsampling
+        nn.init.zeros_(self.mlp[-1].bias)
+        self.transform = "none"  # as a model of its own: an image, no subbands
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return ("lr", "gbuffer")
+
+    def upsample(self, lr: Tensor, gbuffer: Tensor) -> Tensor:
+        """``lr`` (N, 3, h, w) non-negative irradiance to the grid of ``gbuffer`` (N, 11, H, W): (N, 3, H, W)."""
+        lr, gbuffer = lr.float().clamp_min(0), gbuffer.float()
+        n, (height, width) = lr.shape[0], gbuffer.shape[-2:]
+        # Where each tap lies against the fixed estimate: outliers (fireflies, the other side of an edge) show here.
+        reference = torch.log1p(joint_bilateral_upsample(lr, gbuffer, **self.ranges))
+        context = [self.context(gbuffer[:, :GBUFFER_CHANNELS])] if self.context is not None else []
+        source = torch.cat([lr, torch.log1p(lr)], 1)  # gathered together: the values and their logs
+        logits, values = [], []
+        for tap in neighbourhood(source, gbuffer, **self.ranges):
+            row, col = tap.offset
+            features = torch.cat(
+                [
+                    tap.difference.clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT),
+                    tap.difference.abs().clamp_max(_DIFFERENCE_LIMIT),
+                    row.view(1, 1, -1, 1).expand(n, 1, height, width),
+                    col.view(1, 1, 1, -1).expand(n, 1, height, width),
+                    tap.spatial.expand(n, 1, height, width),
+                    tap.values[:, 3:] - reference,
+                    *context,
+                ],
+                1,
+            )
+            correction = self.mlp(features).clamp(-_LOGIT_LIMIT, _LOGIT_LIMIT)
+            # Taps outside the tent (weight 0) stay out: -inf would make a NaN gradient, a large negative does not.
+            base = torch.log(range_weight(tap).clamp_min(1e-30))
+            logits.append(torch.where(tap.spatial > 0, base + correction, torch.full_like(base, -1e4)))
+            values.append(tap.values[:, :3])
+        weights = torch.softmax(torch.stack(logits), 0)
+        return (weights * torch.stack(values)).sum(0)
+
+    def forward(self, lr: Tensor, gbuffer: Tensor, **_: Tensor) -> dict:
+        return {"irradiance": self.upsample(lr, gbuffer), "coefficients": None}

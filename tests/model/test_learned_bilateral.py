@@ -1,0 +1,104 @@
+"""Learned joint bilateral upsampling: starts as joint bilateral, stays a convex combination, learns a kernel."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+from tests.model.helpers import batch
+from wdss.data.sampling import lr_size, point_sample
+from wdss.model.joint_bilateral import joint_bilateral_upsample
+from wdss.model.learned_bilateral import LearnedBilateralUpsample
+
+
+def _randomise(model: LearnedBilateralUpsample, seed: int = 1) -> LearnedBilateralUpsample:
+    """The same module with a non-zero last MLP layer: a kernel far from joint bilateral."""
+    g = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        last = model.mlp[-1]
+        last.weight.copy_(torch.randn(last.weight.shape, generator=g))
+        last.bias.copy_(torch.randn(last.bias.shape, generator=g))
+    return model
+
+
+@pytest.mark.parametrize("size,scale", [((16, 20), 2.0), ((15, 21), 3.0), ((17, 13), 2.5), ((24, 24), 4.0)])
+@pytest.mark.parametrize("context", [8, 0])
+def test_it_starts_as_joint_bilateral_upsampling(size, scale, context):
+    torch.manual_seed(0)
+    data = batch(size=size, scale=scale)
+    model = LearnedBilateralUpsample(context=context)
+    out = model(data["lr"], data["gbuffer"])
+    assert out["coefficients"] is None
+    torch.testing.assert_close(
+        out["irradiance"], joint_bilateral_upsample(data["lr"], data["gbuffer"]), atol=1e-5, rtol=1e-5
+    )
+
+
+def test_any_kernel_is_a_convex_combination_of_the_neighbours():
+    """Whatever the MLP predicts: a constant LR frame stays constant, and no value leaves the LR range."""
+    torch.manual_seed(0)
+    data = batch(size=(18, 22), scale=3.0)
+    model = _randomise(LearnedBilateralUpsample())
+    constant = torch.full_like(data["lr"], 0.7)
+    torch.testing.assert_close(model(constant, data["gbuffer"])["irradiance"], torch.full((2, 3, 18, 22), 0.7))
+    out = model(data["lr"], data["gbuffer"])["irradiance"]
+    assert torch.isfinite(out).all()
+    assert (out >= data["lr"].amin() - 1e-6).all() and (out <= data["lr"].amax() + 1e-6).all()
+    assert not torch.allclose(out, joint_bilateral_upsample(data["lr"], data["gbuffer"]), atol=1e-3)
+
+
+@pytest.mark.parametrize("context", [0, 8])
+def test_the_gradient_reaches_every_parameter_after_one_step(context):
+    torch.manual_seed(0)
+    data = batch(size=(16, 16))
+    model = LearnedBilateralUpsample(context=context)
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-2)
+    for step in range(2):
+        optimizer.zero_grad()
+        loss = (model(data["lr"], data["gbuffer"])["irradiance"] - data["target"] / data["brdf"]).abs().mean()
+        loss.backward()
+        if step == 1:  # the zero last layer moved in step 0, so now every layer before it has a gradient
+            for name, parameter in model.named_parameters():
+                assert parameter.grad is not None and parameter.grad.abs().sum() > 0, name
+        optimizer.step()
+
+
+def test_it_learns_an_edge_the_fixed_kernel_blurs():
+    """Two surfaces whose albedos differ by less than the fixed albedo range (sigma 0.1) but whose irradiance
+    differs by 4x: joint bilateral upsampling mixes them at the edge, a learned kernel separates them."""
+    torch.manual_seed(0)
+    n, height, width, scale = 4, 32, 32, 2.0
+    g = torch.Generator().manual_seed(0)
+    gbuffer = torch.zeros(n, 11, height, width)
+    gbuffer[:, 3] = 0.5  # one depth, one normal: only albedo tells the surfaces apart
+    gbuffer[:, 6] = 1.0
+    irradiance = torch.zeros(n, 3, height, width)
+    for i in range(n):  # a vertical edge at a random column, a different one per image
+        edge = int(torch.randint(8, 24, (1,), generator=g))
+        gbuffer[i, :3, :, edge:] = 0.05
+        irradiance[i, :, :, :edge], irradiance[i, :, :, edge:] = 0.5, 2.0
+    lr = point_sample(irradiance, lr_size(height, width, scale))
+    model = LearnedBilateralUpsample()
+
+    def error() -> float:
+        with torch.no_grad():
+            return float((model(lr, gbuffer)["irradiance"] - irradiance).abs().mean())
+
+    before = error()
+    assert before == pytest.approx(float((joint_bilateral_upsample(lr, gbuffer) - irradiance).abs().mean()), rel=1e-5)
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-2)
+    for _ in range(60):
+        optimizer.zero_grad()
+        F.l1_loss(model(lr, gbuffer)["irradiance"], irradiance).backward()
+        optimizer.step()
+    assert error() < 0.3 * before
+
+
+def test_bad_arguments_are_refused():
+    with pytest.raises(ValueError, match="hidden"):
+        LearnedBilateralUpsample(hidden=0)
+    with pytest.raises(ValueError, match="radius"):
+        LearnedBilateralUpsample(radius=0)
+    with pytest.raises(ValueError, match="sigma"):
+        LearnedBilateralUpsample(sigma_depth=0.0)
