@@ -32,6 +32,7 @@ __all__ = [
     "FALLBACK_WEIGHT",
     "JointBilateralUpsample",
     "Tap",
+    "check_ranges",
     "joint_bilateral_upsample",
     "neighbourhood",
     "range_weight",
@@ -57,6 +58,14 @@ def _taps(hr: int, lr: int, radius: int, device: torch.device) -> list[tuple[Ten
     return taps
 
 
+def check_ranges(sigma_depth: float, sigma_normal: float, sigma_albedo: float, radius: int) -> None:
+    """Refuse a kernel that cannot be built: a radius that is not a positive integer, a sigma that is not positive."""
+    if int(radius) != radius or radius < 1:
+        raise ValueError(f"radius must be a positive integer, got {radius}")
+    if min(sigma_depth, sigma_normal, sigma_albedo) <= 0:
+        raise ValueError("sigma_depth, sigma_normal and sigma_albedo must be positive")
+
+
 class Tap(NamedTuple):
     """One LR neighbour of every HR pixel: its values, where it lies and how its guide differs."""
 
@@ -80,10 +89,7 @@ def neighbourhood(
     The guide differences are scaled so that a range term is a plain squared distance: ``exp(-|difference|^2)``
     is the module docstring's range weight.
     """
-    if int(radius) != radius or radius < 1:
-        raise ValueError(f"radius must be a positive integer, got {radius}")
-    if min(sigma_depth, sigma_normal, sigma_albedo) <= 0:
-        raise ValueError("sigma_depth, sigma_normal and sigma_albedo must be positive")
+    check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
     if lr.shape[0] != gbuffer.shape[0] or gbuffer.shape[1] < 7:
         raise ValueError(f"lr {tuple(lr.shape)} and gbuffer {tuple(gbuffer.shape)} do not form a batch")
     radius = int(radius)
@@ -155,8 +161,7 @@ class JointBilateralUpsample(nn.Module):
         self, sigma_depth: float = 0.01, sigma_normal: float = 0.1, sigma_albedo: float = 0.1, radius: int = 2
     ) -> None:
         super().__init__()
-        if int(radius) != radius or radius < 1 or min(sigma_depth, sigma_normal, sigma_albedo) <= 0:
-            raise ValueError(f"radius must be a positive integer and sigmas positive, got radius={radius}")
+        check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
         self.sigma_depth, self.sigma_normal, self.sigma_albedo = sigma_depth, sigma_normal, sigma_albedo
         self.radius = int(radius)
         self.transform = "none"

@@ -20,7 +20,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from wdss.model.joint_bilateral import joint_bilateral_upsample, neighbourhood, range_weight
+from wdss.model.joint_bilateral import check_ranges, joint_bilateral_upsample, neighbourhood, range_weight
 
 __all__ = ["LearnedBilateralUpsample"]
 
@@ -53,10 +53,7 @@ class LearnedBilateralUpsample(nn.Module):
         super().__init__()
         if hidden < 1 or context < 0:
             raise ValueError(f"hidden must be >= 1 and context >= 0, got hidden={hidden}, context={context}")
-        if int(radius) != radius or radius < 1:
-            raise ValueError(f"radius must be a positive integer, got {radius}")
-        if min(sigma_depth, sigma_normal, sigma_albedo) <= 0:
-            raise ValueError("sigma_depth, sigma_normal and sigma_albedo must be positive")
+        check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
         self.ranges = dict(sigma_depth=sigma_depth, sigma_normal=sigma_normal, sigma_albedo=sigma_albedo, radius=radius)
         self.context = (
             nn.Sequential(
