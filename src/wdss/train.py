@@ -45,6 +45,7 @@ def _check_numbers(cfg: DictConfig) -> None:
         ("data.patches_per_frame", 1, False),
         ("data.patch_size", 1, True),  # null: whole frames
         ("data.num_workers", 0, False),
+        ("data.cache_mb", 0, True),  # absent: the data module's default
     ):
         value = OmegaConf.select(cfg, key, default=None)
         if value is None and optional:

@@ -34,7 +34,9 @@ Sources (``format``): ``exr`` reads the scenes' EXR files; ``packed`` a packed s
 ``auto`` the packed copy of every sequence that has an up-to-date one holding the buffers needed, the EXR files of
 the others. Where the per-pixel preprocessing runs (``preprocess_on``): ``loader`` in the loader's workers,
 ``device`` on the model's device after the transfer (:meth:`SceneDataModule.on_after_batch_transfer`); ``auto``
-picks ``device`` when the trainer runs on an accelerator, ``loader`` on a CPU. Both give the same batch.
+picks ``device`` when the trainer runs on an accelerator, ``loader`` on a CPU. Both give the same batch. Decoded
+EXR frames are kept in a per-process LRU of ``cache_mb`` MB (:class:`wdss.data.cache.FrameCache`; 0: none), so a
+frame is decoded once per loader worker rather than once per patch.
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ import lightning as L
 import torch
 from torch.utils.data import DataLoader
 
+from wdss.data.cache import FrameCache
 from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing, requirements
 from wdss.data.layouts import SceneError, Sequence, discover_sequences
 from wdss.data.packed import PackedSequence, discover_packed, is_packed
@@ -115,6 +118,7 @@ class SceneDataModule(L.LightningDataModule):
         format: str = "auto",  # noqa: A002 (the config key's name)
         packed_root: str | Path | None = None,
         preprocess_on: str = "auto",
+        cache_mb: int = 1024,
     ) -> None:
         super().__init__()
         if format not in FORMATS:
@@ -152,6 +156,10 @@ class SceneDataModule(L.LightningDataModule):
         self.sequence_length = sequence_length
         self.seed = seed
         self.prepare = prepare
+        if isinstance(cache_mb, bool) or not isinstance(cache_mb, int) or cache_mb < 0:
+            raise ValueError(f"data.cache_mb must be an integer >= 0 (0: no cache), got {cache_mb!r}")
+        # EXR sequences share one budget per process (each loader worker holds its own cache).
+        self.cache = FrameCache(cache_mb * 2**20) if cache_mb else None
         self.datasets: dict[str, Any] = {}
 
     @staticmethod
@@ -168,7 +176,7 @@ class SceneDataModule(L.LightningDataModule):
             raise SceneError(f"data.splits has no {split!r} split")
         names, ranges = self.splits[split]
         if self.format == "exr":
-            return discover_sequences(self.root, names, self.layout), ranges
+            return self._cached(discover_sequences(self.root, names, self.layout)), ranges
         if self.format == "packed":
             sequences = discover_packed(self.packed_root, names)
             for seq in sequences:
@@ -180,7 +188,14 @@ class SceneDataModule(L.LightningDataModule):
                     )
             return sequences, ranges
         need = set().union(*requirements(keys, self.prep).values())
-        return [self._auto(name, need) for name in names], ranges
+        return self._cached([self._auto(name, need) for name in names]), ranges
+
+    def _cached(self, sequences: list) -> list:
+        """EXR sequences keep their decoded frames in the data module's cache (packed ones read patches)."""
+        for seq in sequences:
+            if isinstance(seq, Sequence):
+                seq.cache = self.cache
+        return sequences
 
     def _auto(self, name: str, need: set[str]) -> Sequence | PackedSequence:
         """The packed copy of a sequence where it is complete, up to date and holds ``need``; else its EXR files."""

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from wdss.data.cache import FrameCache
 from wdss.data.exr import read_exr, read_exr_size
 from wdss.data.preprocess import depth_range as frame_depth_range
 from wdss.data.sampling import crop
@@ -324,6 +325,7 @@ class Sequence:
         self.sanitized: dict[str, int] = {}
         self._sizes: dict[tuple[int, str], tuple[str, tuple[int, int]]] = {}  # (height, stem) -> first file, size
         self._shapes: dict[int, tuple[int, int]] = {}
+        self.cache: FrameCache | None = None  # decoded frames kept between reads (the data module sets one)
         # At discovery: a malformed sidecar fails before training starts.
         self._cameras, self.frame_rate = self._read_sidecar()
 
@@ -355,12 +357,24 @@ class Sequence:
         return parse_sidecar(self.source.read_bytes("sequence.json"), self.source.describe("sequence.json"))
 
     def read(self, frame: int, height: int, buffers: Iterable[str], *, sanitize: bool = False) -> dict[str, np.ndarray]:
-        """The requested buffers of one frame at one resolution, as float32 ``(C, H, W)`` arrays.
+        """The requested buffers of one frame at one resolution, as float32 ``(C, H, W)`` arrays (the caller's own).
 
         Non-finite values are an error naming file, channel, frame and count; with ``sanitize`` they are
         replaced by 0, counted in :attr:`sanitized` (per file) and logged.
         """
+        decoded = self._decoded(frame, height, buffers, sanitize)
+        return {k: v.copy() for k, v in decoded.items()} if self.cache is not None else decoded
+
+    def _decoded(self, frame: int, height: int, buffers: Iterable[str], sanitize: bool) -> dict[str, np.ndarray]:
+        """:meth:`read`'s arrays, from :attr:`cache` when it holds them (then read-only: copy before writing)."""
         wanted = list(dict.fromkeys(buffers))
+        if self.cache is None:
+            return self._decode(frame, height, wanted, sanitize)
+        key = (str(self.source.path), frame, height, tuple(wanted), sanitize)
+        found = self.cache.get(key)
+        return found if found is not None else self.cache.put(key, self._decode(frame, height, wanted, sanitize))
+
+    def _decode(self, frame: int, height: int, wanted: list[str], sanitize: bool) -> dict[str, np.ndarray]:
         by_file: dict[str, list[tuple[str, Slot]]] = {}
         for buffer in wanted:
             if buffer not in BUFFERS:
@@ -430,9 +444,11 @@ class Sequence:
         """
         wanted = list(dict.fromkeys(buffers))
         extra = depth_range and "depth" not in wanted
-        full = self.read(frame, height, [*wanted, "depth"] if extra else wanted, sanitize=sanitize)
+        full = self._decoded(frame, height, [*wanted, "depth"] if extra else wanted, sanitize)
         found = frame_depth_range(full["depth"], depth_far) if depth_range else None
-        return {k: crop(full[k], window) for k in wanted}, found
+        if self.cache is None:
+            return {k: crop(full[k], window) for k in wanted}, found
+        return {k: np.array(crop(full[k], window)) for k in wanted}, found  # a copy: cached frames are read-only
 
     def _check_size(self, frame: int, height: int, stem: str, name: str, size: tuple[int, int]) -> None:
         """A file must have the size of the same file of the sequence's first frame at its resolution.

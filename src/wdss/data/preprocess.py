@@ -60,7 +60,9 @@ def _far(depth: Tensor, far: float | None) -> Tensor:
 
 def depth_range(depth: np.ndarray | Tensor, far: float | None) -> tuple[float, float]:
     """The min-max normalisation range of one whole frame's depth, after the far clamp (float32 values)."""
-    t = _far(torch.as_tensor(np.asarray(depth, dtype=np.float32)), far)
+    if not isinstance(depth, Tensor):  # a cached frame is read-only, which torch would warn about
+        depth = np.require(depth, np.float32, ["W"])
+    t = _far(torch.as_tensor(depth), far)
     return float(t.min()), float(t.max())
 
 
