@@ -69,8 +69,15 @@ def test_a_sequence_read_is_the_callers_to_modify(root):
 
 def loader(root: Path, cache_mb: int):
     dm = SceneDataModule(
-        root, {"train": ["seq_a"]}, BATCH_KEYS, patch_size=12, batch_size=2, patches_per_frame=3, flips=True,
-        cache_mb=cache_mb, seed=3,
+        root,
+        {"train": ["seq_a"]},
+        BATCH_KEYS,
+        patch_size=12,
+        batch_size=2,
+        patches_per_frame=3,
+        flips=True,
+        cache_mb=cache_mb,
+        seed=3,
     )
     dm.setup("fit")
     return dm.train_dataloader()
