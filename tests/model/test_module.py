@@ -247,3 +247,19 @@ def test_temporal_settings_must_agree():
         module(weights={"l1": 1.0, "temporal": 0.3})
     with pytest.raises(ValueError, match="model.temporal=none but the network has temporal branch"):
         module(temporal=True, temporal_mode="none")
+
+
+@pytest.mark.parametrize("in_validation", [False, True])
+def test_flip_is_a_test_metric_and_in_validation_only_when_asked(in_validation):
+    model = SuperResolutionModule(
+        {"_target_": "wdss.model.baselines.Upsample", "demodulated": True}, flip=True, flip_in_validation=in_validation
+    )
+    logged: list[str] = []
+    model.log = lambda name, *args, **kwargs: logged.append(name)
+    data = batch(n=1, size=(16, 16))
+    data["sequence"], data["frame"] = ["a"], torch.tensor([1])
+    with torch.no_grad():
+        model._evaluate(data, "val", "")
+        model._evaluate(data, "test", "_2x")
+    assert {"test/flip_2x", "test/flip_hdr_2x", "test/psnr_2x"} <= set(logged)
+    assert ("val/flip" in logged) == ("val/flip_hdr" in logged) == in_validation and "val/psnr" in logged

@@ -38,6 +38,8 @@ class SuperResolutionModule(L.LightningModule):
     ``loss_weights``: see :class:`~wdss.model.losses.WDSSLoss`. ``optimizer``/``scheduler``: ``_partial_``
     ``_target_`` mappings. ``lpips``: ``{"backbone": path, "linear": path}`` of local weight files, or None.
     ``temporal``: ``gt_history``, ``recurrent`` or ``none`` (default: whatever the network's branch implies).
+    ``flip``: FLIP (LDR and HDR) among the test metrics; ``flip_in_validation``: in validation too (off by default:
+    FLIP is most of a CPU validation's time, and checkpoints are chosen by ``val/psnr``).
     """
 
     def __init__(
@@ -48,6 +50,7 @@ class SuperResolutionModule(L.LightningModule):
         scheduler: Mapping[str, Any] | None = None,
         tonemap_name: str = "hable",
         flip: bool = True,
+        flip_in_validation: bool = False,
         lpips: Mapping[str, str] | None = None,
         image_every_n_epochs: int = 1,
         trainable: bool = True,
@@ -65,6 +68,7 @@ class SuperResolutionModule(L.LightningModule):
             "scheduler": _plain(scheduler),
             "tonemap_name": tonemap_name,
             "flip": flip,
+            "flip_in_validation": flip_in_validation,
             "lpips": _plain(lpips),
             "image_every_n_epochs": image_every_n_epochs,
             "trainable": trainable,
@@ -225,10 +229,12 @@ class SuperResolutionModule(L.LightningModule):
         out = self(batch)
         if self.temporal == "recurrent":
             self._state = (batch["sequence"][0], int(batch["frame"][0]), out["irradiance"].detach())
+        # FLIP is most of a CPU validation's cost, and checkpoints are chosen by val/psnr: test always has it.
+        flip = stage == "test" or bool(self.hparams.get("flip_in_validation", False))
         if out.get("display") is not None:
-            values = self.metrics.display(out["display"].float(), batch["target"].float())
+            values = self.metrics.display(out["display"].float(), batch["target"].float(), flip=flip)
         else:
-            values = self.metrics(out["color"].float(), batch["target"].float())
+            values = self.metrics(out["color"].float(), batch["target"].float(), flip=flip)
         n = batch["target"].shape[0]
         # sync_dist: under DDP each rank evaluates its share of the frames; Lightning reduces a mean as the sum of
         # the ranks' batch-size-weighted sums over their summed batch sizes, so the value is that of one process.
