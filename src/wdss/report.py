@@ -9,6 +9,8 @@ Reads the jobs of a sweep (the runs nested under its parent run) and writes, int
   closest to 1, and the temporal PSNR; :mod:`wdss.model.temporal_metrics`) at the table's scale, each
   ``mean ± half-width`` of the 95% t-interval over the ``n`` seeds (``n/a`` with one seed), the best of each
   column in bold; a cell whose jobs failed says so instead of disappearing;
+  below it, which of the paper's orderings hold at that scale (:data:`PAPER_ORDERINGS`: the PSNR difference of
+  each claimed pair, paired by seed, with its 95% t-interval);
 * ``table.csv``: every metric at every scale and their average over scales, as mean, 95% half-width and n;
 * ``tradeoff.png``: PSNR and FLIP against ms/frame and against GFLOPs, the Pareto front marked, with the
   training wall-clock per configuration beside it;
@@ -70,6 +72,18 @@ PAPER_LABELS = {
 }
 # The scale a paper table reports when its sweep tests several: "avg" is the mean over the tested scales.
 PAPER_SCALES = {"ablation_wavelet": "2x", "ablation_arch": "2x", "methods": "3x", "scales": "avg"}
+# The paper's orderings by PSNR, as adjacent claims (lower, relation, higher) between variants: the report states
+# which hold at the scale its table shows. Wavelet formulation: none < DWT-haar < SWT-haar < SWT-sym4 <= SWT-db4;
+# methods: WDSS (SWT-db4) > DFASR > Real-ESRGAN > bicubic.
+PAPER_ORDERINGS = {
+    "ablation_wavelet": (
+        ("none", "<", "dwt_haar"),
+        ("dwt_haar", "<", "swt_haar"),
+        ("swt_haar", "<", "swt_sym4"),
+        ("swt_sym4", "<=", "swt_db4"),
+    ),
+    "methods": (("bicubic", "<", "real_esrgan"), ("real_esrgan", "<", "dfasr"), ("dfasr", "<", "swt_db4")),
+}
 # Hydra's override_dirname joins ``key=value`` items with commas and does not escape list values ("[2.0,3.0]"):
 # an item starts only where a key and "=" follow the comma.
 _ITEM = re.compile(r",(?=[+~]*[\w.@/-]+=)")
@@ -287,6 +301,67 @@ def compact_table(rows: Sequence[str], metrics, notes: dict[str, str], columns, 
         n = max((metrics[row].get(key, (0, 0, 0))[2] for key, *_ in columns), default=0)
         note = [notes.get(row, "")] if with_notes else []
         lines.append("| " + " | ".join([row, *cells[row], str(n), *note]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _seed(run) -> str:
+    return overrides(run).get("seed", run.data.tags.get("seed", "?"))
+
+
+def _psnr(run, scale: str, scales: Sequence[str]) -> float:
+    data = run.data.metrics
+    if scale == "avg":
+        values = [data.get(f"test/psnr_{s}", float("nan")) for s in scales]
+        return statistics.fmean(values) if values else float("nan")
+    return data.get(f"test/psnr_{scale}", float("nan"))
+
+
+def orderings(sweep: str, groups: dict[str, list], scale: str, scales: Sequence[str]) -> str:
+    """Which of the paper's orderings (:data:`PAPER_ORDERINGS`) hold, by the PSNR difference of each claimed pair
+    on the seeds both rows finished (paired by seed), with its 95% t-interval; empty for a sweep without claims.
+
+    A strict claim holds when the interval lies above zero and is reversed when it lies below; a ``<=`` claim holds
+    unless the interval lies below zero. Otherwise the difference is within the seeds' spread: not resolved.
+    """
+    claims = PAPER_ORDERINGS.get(sweep)
+    if not claims or not scales:
+        return ""
+    rows: dict[str, list[str]] = defaultdict(list)
+    for row, row_runs in groups.items():
+        variant = row_runs[0].data.tags.get("variant")
+        if variant:
+            rows[variant].append(row)
+    label = "the mean over " + "/".join(scales) if scale == "avg" else scale
+    lines = [f"\nThe paper's orderings at {label} (PSNR of the higher minus the lower row, paired by seed):\n"]
+    for low, relation, high in claims:
+        claim = f"{PAPER_LABELS.get(low, low)} {relation} {PAPER_LABELS.get(high, high)}"
+        if len(rows.get(low, [])) != 1 or len(rows.get(high, [])) != 1:
+            found = "not in this sweep" if not rows.get(low) or not rows.get(high) else "several rows per variant"
+            lines.append(f"- {claim}: not tested ({found})")
+            continue
+
+        def by_seed(variant: str) -> dict[str, float]:
+            runs = [r for r in groups[rows[variant][0]] if r.info.status == "FINISHED"]
+            return {_seed(r): _psnr(r, scale, scales) for r in runs}
+
+        lower, higher = by_seed(low), by_seed(high)
+        seeds = sorted(set(lower) & set(higher))
+        differences = [higher[seed] - lower[seed] for seed in seeds]
+        mean, half = interval(differences)
+        if not math.isfinite(mean):
+            lines.append(f"- {claim}: not tested (no seed finished in both rows)")
+            continue
+        if not math.isfinite(half):
+            verdict = f"{'agrees' if mean > 0 else 'disagrees'} in sign, one seed: no interval, not resolved"
+            lines.append(f"- {claim}: {verdict} ({mean:+.2f} dB, n=1)")
+            continue
+        if mean - half > 0:
+            verdict = "holds"
+        elif mean + half < 0:
+            verdict = "reversed"
+        else:
+            verdict = "holds (a tie within the interval)" if relation == "<=" else "not resolved (within the interval)"
+        lines.append(f"- {claim}: {verdict} ({mean:+.2f} ± {half:.2f} dB, n={len(differences)})")
     return "\n".join(lines) + "\n"
 
 
@@ -524,6 +599,7 @@ def report(
         + "mean ± half-width of the 95% t-interval over n seeds (n/a with one seed); the best of each column in bold."
         + "\n\n"
         + compact_table(rows, metrics, notes, columns, scales)
+        + orderings(name, groups, shown, scales)
         + (TEMPORAL_NOTE if any("twe_ratio" in key or "tpsnr" in key for key, *_ in columns) else "")
         + f"\nMetrics on tone-mapped output: {metric_path(runs)}. {len(runs)} runs ({counts}); "
         + f"parent run {parent_run.info.run_id}; every metric at every scale in table.csv.\n"
