@@ -157,10 +157,10 @@ def test_the_papers_orderings_are_judged_by_paired_seed_differences_and_their_in
     differences = [d - n for d, n in zip(PSNR["dwt_haar"], PSNR["none"], strict=True)]  # the failed seed 3 drops out
     mean, half = float(np.mean(differences)), t_half_width(differences)
     assert mean - half > 0
-    assert f"- No wavelet < DWT-haar: holds ({mean:+.2f} ± {half:.2f} dB, n=3)" in text
+    assert f"- No wavelet < DWT-haar: holds, {mean:+.2f} ± {half:.2f} dB, n=3" in text
     assert "- DWT-haar < SWT-haar: not tested (not in this sweep)" in text
     methods = (one_seed / "table.md").read_text()
-    assert "- DFASR < SWT-db4: agrees in sign, one seed: no interval, not resolved (+1.50 dB, n=1)" in methods
+    assert "- DFASR < SWT-db4: not resolved (one seed, no interval; the sign agrees), +1.50 dB, n=1" in methods
     assert "- Bicubic < Real-ESRGAN: not tested (not in this sweep)" in methods
 
 
@@ -170,10 +170,10 @@ def test_an_ordering_is_reversed_or_unresolved_by_the_interval(tmp_path):
     uri = fake_sweep(tmp_path, "ablation_wavelet", jobs)
     text = (report("ablation_wavelet", tracking_uri=uri, out_dir=tmp_path / "reports") / "table.md").read_text()
     down = [b - a for a, b in zip(psnr["swt_haar"], psnr["swt_sym4"], strict=True)]
-    assert f"- SWT-haar < SWT-sym4: reversed ({np.mean(down):+.2f} ± {t_half_width(down):.2f} dB, n=3)" in text
+    assert f"- SWT-haar < SWT-sym4: reversed, {np.mean(down):+.2f} ± {t_half_width(down):.2f} dB, n=3" in text
     tie = [b - a for a, b in zip(psnr["swt_sym4"], psnr["swt_db4"], strict=True)]
     assert abs(np.mean(tie)) < t_half_width(tie)
-    assert "- SWT-sym4 <= SWT-db4: holds (a tie within the interval)" in text
+    assert "- SWT-sym4 <= SWT-db4: holds as a tie (the interval contains 0)" in text
 
 
 def test_other_axes_than_the_seed_split_rows_and_runs_names_parse_with_lists(tmp_path):

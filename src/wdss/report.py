@@ -352,16 +352,17 @@ def orderings(sweep: str, groups: dict[str, list], scale: str, scales: Sequence[
             lines.append(f"- {claim}: not tested (no seed finished in both rows)")
             continue
         if not math.isfinite(half):
-            verdict = f"{'agrees' if mean > 0 else 'disagrees'} in sign, one seed: no interval, not resolved"
-            lines.append(f"- {claim}: {verdict} ({mean:+.2f} dB, n=1)")
+            verdict = f"not resolved (one seed, no interval; the sign {'agrees' if mean > 0 else 'disagrees'})"
+            lines.append(f"- {claim}: {verdict}, {mean:+.2f} dB, n=1")
             continue
         if mean - half > 0:
             verdict = "holds"
         elif mean + half < 0:
             verdict = "reversed"
         else:
-            verdict = "holds (a tie within the interval)" if relation == "<=" else "not resolved (within the interval)"
-        lines.append(f"- {claim}: {verdict} ({mean:+.2f} ± {half:.2f} dB, n={len(differences)})")
+            verdict = "holds as a tie" if relation == "<=" else "not resolved"
+            verdict += " (the interval contains 0)"
+        lines.append(f"- {claim}: {verdict}, {mean:+.2f} ± {half:.2f} dB, n={len(differences)}")
     return "\n".join(lines) + "\n"
 
 
