@@ -96,6 +96,7 @@ def test_other_settings_in_an_existing_folder_are_refused(rendered):
 
 
 def test_a_killed_render_resumes_without_redoing_frames(tmp_path):
+    import json
     import os
     import signal
     import subprocess
@@ -112,9 +113,14 @@ def test_a_killed_render_resumes_without_redoing_frames(tmp_path):
     process = subprocess.Popen(
         [sys.executable, "-c", script], cwd=PROJECT_ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
-    first = tmp_path / "seq" / "8P" / "PretonemapMetallic.0001.exr"  # frame 1 complete (8P is written last)
+    # Frame 1 is complete once the sidecar records its time (written, atomically, after all its files).
+    sidecar = tmp_path / "seq" / "sequence.json"
+
+    def frame_one_done() -> bool:
+        return sidecar.exists() and "1" in json.loads(sidecar.read_text()).get("render_seconds", {})
+
     deadline = time.time() + 300
-    while not first.exists():
+    while not frame_one_done():
         assert process.poll() is None and time.time() < deadline
         time.sleep(0.01)
     os.kill(process.pid, signal.SIGKILL)
