@@ -11,7 +11,6 @@ import torch
 
 from wdss.data import BATCH_KEYS, SceneDataModule, Sequence
 from wdss.data.cache import FrameCache
-from wdss.data.layouts import Source
 from wdss.data.synthetic import write_sequence
 
 
@@ -88,18 +87,12 @@ def epoch(batches, number: int) -> list[dict]:
     return list(batches)
 
 
-def test_cached_batches_equal_decoded_ones_and_each_file_is_decoded_once(root, monkeypatch):
+def test_cached_batches_equal_decoded_ones_and_each_file_is_decoded_once(root, opened):
     # Mirroring and the preprocessing write into their tensors: none of it may reach a cached frame.
     plain = loader(root, cache_mb=0)
     uncached = [epoch(plain, n) for n in range(3)]
-    names: list[str] = []
-    original = Source.read
-
-    def counting(self, name, channels):
-        names.append(name)
-        return original(self, name, channels)
-
-    monkeypatch.setattr(Source, "read", counting)
+    names = opened
+    names.clear()
     cached_loader = loader(root, cache_mb=64)
     cached = [epoch(cached_loader, 0)]
     decoded = len(names)

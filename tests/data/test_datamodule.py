@@ -19,7 +19,6 @@ from wdss.data import (
     point_sample,
 )
 from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf
-from wdss.data.layouts import Source
 from wdss.data.synthetic import write_sequence
 
 HR = (24, 36)
@@ -31,20 +30,6 @@ def root(tmp_path_factory) -> Path:
     write_sequence(root / "seq_a", layout="unreal", frames=(1, 2, 3, 4), size=HR, scales=(2, 3), cameras=True)
     write_sequence(root / "seq_b", layout="dfasr", frames=(1, 2, 3), size=HR, scales=(2, 3), seed=1)
     return root
-
-
-@pytest.fixture
-def opened(monkeypatch) -> list[str]:
-    """The names of every EXR file opened through a scene source."""
-    names: list[str] = []
-    original = Source.read
-
-    def counting(self, name, channels):
-        names.append(name)
-        return original(self, name, channels)
-
-    monkeypatch.setattr(Source, "read", counting)
-    return names
 
 
 def frames_of(names: list[str]) -> set[int]:
