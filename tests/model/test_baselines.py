@@ -130,3 +130,55 @@ def test_rendering_methods_learn(net, scale):
     data = rendering_batch(scale, (18, 18) if scale == 3.0 else (16, 16))
     losses = losses_over_steps(module, data)
     assert losses[1] < losses[0]
+
+
+BASELINE_OF_SKIP = {
+    "nsrr": (TINY_NSRR, 2.0, (16, 20), {"_target_": "wdss.model.baselines.Upsample", "mode": "bilinear"}),
+    "fusesr": (
+        TINY_FUSESR,
+        3.0,
+        (18, 27),
+        {"_target_": "wdss.model.baselines.Upsample", "mode": "bilinear", "demodulated": True},
+    ),
+}  # the parameter-free upsampling each network's skip adds to: NSRR bilinear colour, FuseSR bilinear irradiance
+
+
+@pytest.mark.parametrize("name", sorted(BASELINE_OF_SKIP))
+def test_skip_starts_near_its_upsampling_and_is_exactly_it_without_a_correction(name):
+    net, scale, size, upsampler = BASELINE_OF_SKIP[name]
+    data = rendering_batch(scale, size)
+    expected = SuperResolutionModule(upsampler, flip=False)(data)["color"]
+    torch.manual_seed(0)
+    module = SuperResolutionModule({**net, "skip": True}, flip=False)
+    near = module(data)["color"]
+    # The exit is shrunk, not zeroed: the start is within a few per cent of the upsampling, and gradients flow.
+    assert float((torch.log1p(near) - torch.log1p(expected)).abs().mean()) < 0.05
+    assert (
+        float((torch.log1p(SuperResolutionModule(net, flip=False)(data)["color"]) - torch.log1p(expected)).abs().mean())
+        > 0.2
+    )
+    exit_conv = module.net.out if name == "nsrr" else module.net.up
+    torch.nn.init.zeros_(exit_conv.weight)
+    torch.testing.assert_close(module(data)["color"], expected, rtol=1e-4, atol=1e-5)
+    # The skip adds no parameter: checkpoints of both settings load into either.
+    assert module.net.state_dict().keys() == SuperResolutionModule(net, flip=False).net.state_dict().keys()
+
+
+def test_real_esrgan_skip_starts_at_bicubic_of_the_tonemapped_lr():
+    from wdss.data.tonemap import tonemap
+
+    data = batch(size=(18, 27), scale=3.0)
+    module = SuperResolutionModule({**TINY_RRDB, "skip": True}, flip=False).eval()
+    torch.nn.init.zeros_(module.net.conv_last.weight)
+    expected = torch.nn.functional.interpolate(tonemap(data["lr_color"], "hable"), size=(18, 27), mode="bicubic")
+    torch.testing.assert_close(module(data)["display"], expected.clamp(0, 1))
+    with pytest.raises(ValueError, match="published weights .* need skip=false"):
+        RRDBNet(skip=True, weights="/nowhere/RealESRGAN_x4plus.pth")
+
+
+@pytest.mark.parametrize("variant", ["nsrr", "fusesr", "real_esrgan"])
+def test_cpu_experiment_turns_the_comparison_skips_on(variant):
+    from tests.test_train import compose_train
+
+    assert compose_train([f"variant={variant}", "experiment=cpu"]).model.net.skip is True
+    assert compose_train([f"variant={variant}"]).model.net.skip is False  # the published design by default

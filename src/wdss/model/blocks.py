@@ -6,11 +6,23 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-__all__ = ["DoubleResidual", "GatedConv", "RIRBlock", "conv3x3"]
+__all__ = ["DoubleResidual", "GatedConv", "RIRBlock", "conv3x3", "scale_exit"]
 
 
 def conv3x3(cin: int, cout: int, dilation: int = 1) -> nn.Conv2d:
     return nn.Conv2d(cin, cout, 3, padding=dilation, dilation=dilation)
+
+
+EXIT_SCALE = 0.1
+
+
+@torch.no_grad()
+def scale_exit(conv: nn.Conv2d, scale: float = EXIT_SCALE) -> None:
+    """Shrink the last convolution of a network that adds to a skip, so that it starts near the skip. Not to zero:
+    a zero exit passes no gradient to the layers before it, which then stay at their initialisation for long."""
+    conv.weight.mul_(scale)
+    if conv.bias is not None:
+        conv.bias.zero_()
 
 
 class DoubleResidual(nn.Module):

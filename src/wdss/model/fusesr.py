@@ -7,6 +7,10 @@ current one and gated by an attention computed from them and the current feature
 ``pixel_shuffle(s)`` upsampling; the result is irradiance, multiplied by the BRDF by the shared remodulation.
 FuseSR is a fixed-integer-scale method (x4, x8 in the paper): other scales are refused. Widths are reduced by
 default (the paper: 6 residual blocks at 128 channels).
+
+``skip=True`` (``recipe.skip``, which ``experiment=cpu`` turns on) adds the output to the bilinearly upsampled LR
+irradiance (in log1p space), so FuseSR starts near ``bilinear_demodulated``: without it, a few hundred CPU steps
+leave regions rare in the training patches (the sky) far too dark (README, "methods" sweep).
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from wdss.model.blocks import DoubleResidual
+from wdss.model.blocks import DoubleResidual, scale_exit
 
 __all__ = ["FuseSR"]
 
@@ -25,12 +29,14 @@ class FuseSR(nn.Module):
 
     fixed_scale = True  # benchmarks run it at its own scale
 
-    def __init__(self, scale: int = 4, width: int = 32, blocks: int = 6, input_log: bool = True) -> None:
+    def __init__(
+        self, scale: int = 4, width: int = 32, blocks: int = 6, input_log: bool = True, skip: bool = False
+    ) -> None:
         super().__init__()
         if int(scale) != scale or scale < 2:
             raise ValueError(f"FuseSR needs an integer scale >= 2 (model.net.scale), got {scale}")
         self.scale = s = int(scale)
-        self.input_log = input_log
+        self.input_log, self.skip = input_log, bool(skip)
         self.encoder = nn.Sequential(nn.Conv2d(7, width, 3, padding=1), nn.ReLU())
         # HR depth, normal, albedo and BRDF (10 channels), folded onto the LR grid.
         self.hr_encoder = nn.Sequential(nn.Conv2d(10 * s * s, width, 3, padding=1), nn.ReLU())
@@ -38,6 +44,8 @@ class FuseSR(nn.Module):
         self.attention = nn.Conv2d(3 * width, 2, 3, padding=1)
         self.body = nn.Sequential(*[DoubleResidual(width) for _ in range(blocks)])
         self.up = nn.Conv2d(2 * width, 3 * s * s, 3, padding=1)
+        if self.skip:
+            scale_exit(self.up)
 
     @property
     def inputs(self) -> tuple[str, ...]:
@@ -62,5 +70,7 @@ class FuseSR(nn.Module):
         gates = torch.sigmoid(self.attention(torch.cat([fused, *histories], 1)))  # motion-vector attention
         x = self.body(fused + gates[:, :1] * histories[0] + gates[:, 1:] * histories[1])
         out = F.pixel_shuffle(self.up(torch.cat([x, fused], 1)), s)
+        if self.skip:
+            out = out + self._log(F.interpolate(lr.float(), size=(height, width), mode="bilinear", align_corners=False))
         irradiance = torch.expm1(out.clamp(max=20.0)).clamp_min(0) if self.input_log else out.clamp_min(0)
         return {"irradiance": irradiance, "coefficients": None}

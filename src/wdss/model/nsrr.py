@@ -5,6 +5,10 @@ backward warping of the previous frame's upsampled features with the high-resolu
 feature-reweighting network that scores the warped history against the current frame (weights in [0, 10]);
 a U-Net reconstruction of colour. This implementation uses one previous frame (NSRR used four) and reduced
 widths by default; its loss in the paper is 1 - SSIM + 0.1 perceptual (here: the configured terms).
+
+``skip=True`` (not NSRR's design; ``recipe.skip``, which ``experiment=cpu`` turns on) adds the U-Net's output to the
+bilinearly upsampled LR colour (in log1p space): without it, a few hundred CPU steps learn the training scenes' mean
+colour rather than to carry the LR colour through (README, "methods" sweep).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from wdss.data.warp import warp_backward
+from wdss.model.blocks import scale_exit
 
 __all__ = ["NSRR", "zero_upsample"]
 
@@ -43,9 +48,10 @@ class NSRR(nn.Module):
         unet: Sequence[int] = (64, 128),
         reweight_width: int = 32,
         input_log: bool = True,
+        skip: bool = False,
     ) -> None:
         super().__init__()
-        self.input_log = input_log
+        self.input_log, self.skip = input_log, bool(skip)
         layers: list[nn.Module] = []
         cin = 4  # RGB-D
         for width in widths:
@@ -68,6 +74,8 @@ class NSRR(nn.Module):
             self.decoders.append(_block(cin + width, width))
             cin = width
         self.out = nn.Conv2d(cin, 3, 3, padding=1)
+        if self.skip:
+            scale_exit(self.out)
 
     @property
     def inputs(self) -> tuple[str, ...]:
@@ -100,6 +108,9 @@ class NSRR(nn.Module):
             x = F.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False)
             x = decoder(torch.cat([x, skip], 1))
         color = self.out(x)
+        if self.skip:
+            upsampled = F.interpolate(lr_color.float(), size=size, mode="bilinear", align_corners=False)
+            color = color + (torch.log1p(upsampled.clamp_min(0)) if self.input_log else upsampled)
         color = torch.expm1(color.clamp(max=20.0)).clamp_min(0) if self.input_log else color.clamp_min(0)
         # NSRR reconstructs colour: colour / F goes through the shared remodulation unchanged.
         return {"irradiance": color / brdf, "coefficients": None}

@@ -4,6 +4,8 @@ It sees only the tone-mapped low-resolution colour, as a general image super-res
 returns a display image. Published weights (scales 2 and 4) load from a local file (``weights``); other scales
 run the network's native scale and resize to the frame. Without weights it must be trained on our frames
 (then tagged so in MLflow); :attr:`needs_training` lets the entry points refuse to evaluate random weights.
+``skip=True`` (not the published network; ``recipe.skip``, on in ``experiment=cpu``) adds the output to the bicubic
+upsampling of the tone-mapped LR, so a network trained from scratch in minutes starts at bicubic.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from wdss.data.tonemap import tonemap
+from wdss.model.blocks import scale_exit
 
 __all__ = ["RRDBNet"]
 
@@ -64,11 +67,16 @@ class RRDBNet(nn.Module):
         num_grow_ch: int = 32,
         weights: str | None = None,
         tonemap_name: str = "hable",
+        skip: bool = False,
     ) -> None:
         super().__init__()
         if scale not in (2, 4):
             raise ValueError(f"RRDBNet's native scale is 2 or 4 (others by resizing), got {scale}")
-        self.scale, self.tonemap_name = scale, tonemap_name
+        if skip and weights:
+            raise ValueError(
+                "model.net.skip=true changes RRDBNet's output: published weights (model.net.weights) need skip=false"
+            )
+        self.scale, self.tonemap_name, self.skip = scale, tonemap_name, bool(skip)
         cin = 3 * (4 if scale == 2 else 1)
         self.conv_first = nn.Conv2d(cin, num_feat, 3, 1, 1)
         self.body = nn.Sequential(*[RRDB(num_feat, num_grow_ch) for _ in range(num_block)])
@@ -77,6 +85,8 @@ class RRDBNet(nn.Module):
         self.conv_up2 = nn.Conv2d(num_feat, num_feat, 3, 1, 1)
         self.conv_hr = nn.Conv2d(num_feat, num_feat, 3, 1, 1)
         self.conv_last = nn.Conv2d(num_feat, 3, 3, 1, 1)
+        if self.skip:
+            scale_exit(self.conv_last)
         self.weights = weights
         if weights:
             if not os.path.isfile(weights):
@@ -97,6 +107,7 @@ class RRDBNet(nn.Module):
         height, width = brdf.shape[-2:]
         lh, lw = lr_color.shape[-2:]
         x = tonemap(lr_color, self.tonemap_name)
+        base = F.interpolate(x, size=(height, width), mode="bicubic", align_corners=False) if self.skip else None
         if self.scale == 2:  # x2 = the x4 body on the pixel-unshuffled input (padded to even sizes)
             x = F.pixel_unshuffle(F.pad(x, (0, lw % 2, 0, lh % 2), mode="replicate"), 2)
         feat = self.conv_first(x)
@@ -106,5 +117,7 @@ class RRDBNet(nn.Module):
         out = self.conv_last(F.leaky_relu(self.conv_hr(feat), 0.2))[..., : lh * self.scale, : lw * self.scale]
         if out.shape[-2:] != (height, width):  # other scales: the native result resized to the frame
             out = F.interpolate(out, size=(height, width), mode="bicubic", align_corners=False, antialias=True)
+        if base is not None:
+            out = out + base
         # Clamped for evaluation only: a clamp in training would zero the gradient of out-of-range pixels.
         return {"display": out if self.training else out.clamp(0.0, 1.0), "irradiance": None, "coefficients": None}
