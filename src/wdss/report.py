@@ -64,6 +64,7 @@ PAPER_LABELS = {
     "bilinear": "Bilinear",
     "bilinear_demodulated": "Bilinear (demod.)",
     "joint_bilateral": "Joint bilateral",
+    "joint_bilateral_color": "Joint bilateral (colour)",
     "learned_bilateral": "Learned bilateral",
     "real_esrgan": "Real-ESRGAN",
     "nsrr": "NSRR",

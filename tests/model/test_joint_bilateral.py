@@ -168,3 +168,17 @@ def test_baseline_runs_through_the_module_without_parameters():
     expected = joint_bilateral_upsample(data["lr"], data["gbuffer"], sigma_depth=0.05) * data["brdf"]
     torch.testing.assert_close(out["color"], expected)
     assert out["coefficients"] is None and isinstance(module.net, JointBilateralUpsample)
+
+
+def test_the_colour_space_variant_filters_the_lr_colour():
+    """``demodulated=False``: joint bilateral upsampling of the LR colour (irradiance times the F of its own pixel),
+    returned as irradiance of the HR F so that the module's remodulation gives that colour back."""
+    torch.manual_seed(0)
+    data = batch(size=(15, 21), scale=3.0)
+    model = JointBilateralUpsample(demodulated=False)
+    assert model.inputs == ("lr", "gbuffer", "brdf")
+    out = model(data["lr"], data["gbuffer"], brdf=data["brdf"])["irradiance"]
+    torch.testing.assert_close(out * data["brdf"], joint_bilateral_upsample(data["lr_color"], data["gbuffer"]))
+    with pytest.raises(ValueError, match="demodulated=false needs the HR brdf"):
+        model(data["lr"], data["gbuffer"])
+    assert JointBilateralUpsample().inputs == ("lr", "gbuffer")  # the demodulated default needs no F

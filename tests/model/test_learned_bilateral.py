@@ -102,3 +102,82 @@ def test_bad_arguments_are_refused():
         LearnedBilateralUpsample(radius=0)
     with pytest.raises(ValueError, match="sigma"):
         LearnedBilateralUpsample(sigma_depth=0.0)
+
+
+# ------------------------------------------------------------------------------------------ tap_brdf
+
+
+def _exponent_one(model: LearnedBilateralUpsample) -> LearnedBilateralUpsample:
+    """Every tap's BRDF exponent at 1 (its logit correction still 0): the colour-space kernel."""
+    with torch.no_grad():
+        model.mlp[-1].bias[1] = 5.0  # clamped to 1
+    return model
+
+
+@pytest.mark.parametrize("size,scale", [((16, 20), 2.0), ((15, 21), 3.0), ((17, 13), 2.5)])
+def test_with_tap_brdf_it_starts_as_joint_bilateral_and_spans_the_colour_space_kernel(size, scale):
+    """Exponent 0 (the start) is demodulated joint bilateral upsampling; exponent 1 filters each tap's colour
+    (irradiance times its own F) and returns it unchanged after remodulation, as
+    ``JointBilateralUpsample(demodulated=False)`` does."""
+    torch.manual_seed(0)
+    data = batch(size=size, scale=scale)
+    model = LearnedBilateralUpsample(tap_brdf=True)
+    assert model.inputs == ("lr", "gbuffer", "brdf")
+    start = model(data["lr"], data["gbuffer"], brdf=data["brdf"])["irradiance"]
+    torch.testing.assert_close(start, joint_bilateral_upsample(data["lr"], data["gbuffer"]), atol=1e-5, rtol=1e-5)
+    colour = _exponent_one(model)(data["lr"], data["gbuffer"], brdf=data["brdf"])["irradiance"] * data["brdf"]
+    torch.testing.assert_close(
+        colour, joint_bilateral_upsample(data["lr_color"], data["gbuffer"]), atol=1e-5, rtol=1e-5
+    )
+    with pytest.raises(ValueError, match="tap_brdf=true: it needs the HR brdf"):
+        model(data["lr"], data["gbuffer"])
+
+
+def test_the_brdf_exponent_is_learned_where_the_target_does_not_follow_the_hr_brdf():
+    """A target whose colour is smooth while the HR BRDF factor carries fine texture (as a denoiser or a shading
+    model that is not albedo times irradiance leaves it): demodulated upsampling paints the texture on, the learned
+    exponent learns to carry the taps' colour through instead."""
+    torch.manual_seed(0)
+    n, height, width, scale = 4, 32, 32, 2.0
+    g = torch.Generator().manual_seed(0)
+    gbuffer = torch.rand(n, 11, height, width, generator=g)
+    brdf = 0.2 + 0.8 * torch.rand(n, 3, height, width, generator=g)
+    colour = torch.full((n, 3, height, width), 0.6)
+    lr = point_sample(colour / brdf, lr_size(height, width, scale))  # the data's demodulation at the LR pixels
+    model = LearnedBilateralUpsample(tap_brdf=True)
+
+    def error() -> float:
+        with torch.no_grad():
+            return float((model(lr, gbuffer, brdf=brdf)["irradiance"] * brdf - colour).abs().mean())
+
+    before = error()
+    assert before > 0.05
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-2)
+    for _ in range(60):
+        optimizer.zero_grad()
+        F.l1_loss(model(lr, gbuffer, brdf=brdf)["irradiance"] * brdf, colour).backward()
+        optimizer.step()
+    assert error() < 0.2 * before
+    without = LearnedBilateralUpsample()  # the logits alone cannot: every tap carries the wrong texture
+    optimizer = torch.optim.Adam(without.parameters(), lr=1e-2)
+    for _ in range(60):
+        optimizer.zero_grad()
+        F.l1_loss(without(lr, gbuffer)["irradiance"] * brdf, colour).backward()
+        optimizer.step()
+    with torch.no_grad():
+        assert float((without(lr, gbuffer)["irradiance"] * brdf - colour).abs().mean()) > 0.5 * before
+
+
+def test_with_tap_brdf_the_gradient_reaches_every_parameter():
+    torch.manual_seed(0)
+    data = batch(size=(16, 16))
+    model = LearnedBilateralUpsample(tap_brdf=True)
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-2)
+    for step in range(2):
+        optimizer.zero_grad()
+        out = model(data["lr"], data["gbuffer"], brdf=data["brdf"])["irradiance"]
+        (out * data["brdf"] - data["target"].roll(1, -1)).abs().mean().backward()
+        if step == 1:
+            for name, parameter in model.named_parameters():
+                assert parameter.grad is not None and parameter.grad.abs().sum() > 0, name
+        optimizer.step()

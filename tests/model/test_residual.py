@@ -152,3 +152,30 @@ def test_auto_exposure_makes_metrics_independent_of_the_data_exposure():
     assert abs(float(tone(grey, grey).mean()) - float(hable(torch.tensor(0.18)))) < 1e-5
     with pytest.raises(ValueError, match="exposure"):
         ToneMap("hable", "bright")
+
+
+def test_the_learned_kernel_with_tap_brdf_is_the_residual_base_and_is_fed_the_brdf():
+    torch.manual_seed(0)
+    data = batch(size=(16, 20))
+    model = net(residual="learned_bilateral", output_space="log", tap_brdf=True)
+    assert "brdf" in model.inputs and model.upsampler.tap_brdf
+    out = model(
+        lr=data["lr"],
+        gbuffer=data["gbuffer"],
+        spatial_mask=data["spatial_mask"],
+        scale=data["scale"],
+        brdf=data["brdf"],
+    )
+    expected = joint_bilateral_upsample(data["lr"], data["gbuffer"])  # exponent 0 and a zero exit at the start
+    torch.testing.assert_close(out["irradiance"], expected, atol=2e-5, rtol=2e-5)
+    assert "brdf" not in net(residual="joint_bilateral", tap_brdf=True).inputs  # the learned kernel's option only
+
+
+def test_the_cpu_experiment_turns_tap_brdf_on_for_the_learned_kernel():
+    from tests.test_train import compose_train
+
+    for variant in ("swt_db4", "learned_bilateral"):
+        assert compose_train([f"variant={variant}", "experiment=cpu"]).model.net.tap_brdf is True
+        assert compose_train([f"variant={variant}"]).model.net.tap_brdf is False
+    colour = compose_train(["variant=joint_bilateral_color", "experiment=cpu"]).model.net
+    assert colour.demodulated is False

@@ -155,23 +155,36 @@ def joint_bilateral_upsample(
 
 
 class JointBilateralUpsample(nn.Module):
-    """Parameter-free baseline: :func:`joint_bilateral_upsample` of the demodulated LR irradiance."""
+    """Parameter-free baseline: :func:`joint_bilateral_upsample` of the demodulated LR irradiance, remodulated with
+    the HR BRDF factor (``demodulated``), or of the LR colour itself (``demodulated=False``: the taps' colours,
+    each remodulated by its own BRDF factor, as a colour-space joint bilateral filter)."""
 
     def __init__(
-        self, sigma_depth: float = 0.01, sigma_normal: float = 0.1, sigma_albedo: float = 0.1, radius: int = 2
+        self,
+        sigma_depth: float = 0.01,
+        sigma_normal: float = 0.1,
+        sigma_albedo: float = 0.1,
+        radius: int = 2,
+        demodulated: bool = True,
     ) -> None:
         super().__init__()
         check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
         self.sigma_depth, self.sigma_normal, self.sigma_albedo = sigma_depth, sigma_normal, sigma_albedo
         self.radius = int(radius)
+        self.demodulated = bool(demodulated)
         self.transform = "none"
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr", "gbuffer")
+        return ("lr", "gbuffer") if self.demodulated else ("lr", "gbuffer", "brdf")
 
-    def forward(self, lr: Tensor, gbuffer: Tensor, **_: Tensor) -> dict:
-        irradiance = joint_bilateral_upsample(
+    def forward(self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, **_: Tensor) -> dict:
+        if not self.demodulated:
+            if brdf is None:
+                raise ValueError("joint bilateral upsampling with demodulated=false needs the HR brdf")
+            # The module remodulates with the HR F: the colour estimate divided by it comes back out unchanged.
+            lr = lr * point_sample(brdf, lr.shape[-2:])
+        upsampled = joint_bilateral_upsample(
             lr,
             gbuffer,
             sigma_depth=self.sigma_depth,
@@ -179,4 +192,5 @@ class JointBilateralUpsample(nn.Module):
             sigma_albedo=self.sigma_albedo,
             radius=self.radius,
         )
+        irradiance = upsampled if self.demodulated else upsampled / brdf
         return {"irradiance": irradiance, "coefficients": None}

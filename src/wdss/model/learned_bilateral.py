@@ -20,6 +20,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
+from wdss.data.sampling import point_sample
 from wdss.model.joint_bilateral import check_ranges, joint_bilateral_upsample, neighbourhood, range_weight
 
 __all__ = ["LearnedBilateralUpsample"]
@@ -49,8 +50,10 @@ class LearnedBilateralUpsample(nn.Module):
         sigma_normal: float = 0.1,
         sigma_albedo: float = 0.1,
         radius: int = 2,
+        tap_brdf: bool = False,
     ) -> None:
         super().__init__()
+        self.tap_brdf = bool(tap_brdf)
         if hidden < 1 or context < 0:
             raise ValueError(f"hidden must be >= 1 and context >= 0, got hidden={hidden}, context={context}")
         check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
@@ -63,27 +66,42 @@ class LearnedBilateralUpsample(nn.Module):
             if context
             else None
         )  # fmt: skip
-        features = 7 + 7 + 2 + 1 + 3 + context  # difference, |difference|, offset, tent, log deviation, context
+        # difference, |difference|, offset, tent, log deviation, context (and the log BRDF ratio with tap_brdf)
+        features = 7 + 7 + 2 + 1 + 3 + context + (3 if self.tap_brdf else 0)
+        outputs = 2 if self.tap_brdf else 1  # the logit correction (and the tap's BRDF exponent)
         self.mlp = nn.Sequential(
-            nn.Conv2d(features, hidden, 1), nn.ReLU(), nn.Conv2d(hidden, hidden, 1), nn.ReLU(), nn.Conv2d(hidden, 1, 1)
-        )
+            nn.Conv2d(features, hidden, 1), nn.ReLU(), nn.Conv2d(hidden, hidden, 1), nn.ReLU(),
+            nn.Conv2d(hidden, outputs, 1),
+        )  # fmt: skip
         nn.init.zeros_(self.mlp[-1].weight)  # start exactly at joint bilateral upsampling
         nn.init.zeros_(self.mlp[-1].bias)
         self.transform = "none"  # as a model of its own: an image, no subbands
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr", "gbuffer")
+        return ("lr", "gbuffer", "brdf") if self.tap_brdf else ("lr", "gbuffer")
 
-    def upsample(self, lr: Tensor, gbuffer: Tensor) -> Tensor:
-        """``lr`` (N, 3, h, w) non-negative irradiance to the grid of ``gbuffer`` (N, 11, H, W): (N, 3, H, W)."""
+    def upsample(self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None) -> Tensor:
+        """``lr`` (N, 3, h, w) non-negative irradiance to the grid of ``gbuffer`` (N, 11, H, W): (N, 3, H, W).
+
+        With ``tap_brdf``, ``brdf`` (N, 3, H, W) is the HR BRDF factor the result is remodulated with; each tap's
+        value is then ``irradiance * (F_tap / F)^b``, ``b`` in [0, 1] learned per pixel and tap (0 at the start):
+        0 keeps the demodulated estimate, 1 carries the tap's own colour (``irradiance * F_tap``) through
+        unchanged, as a colour-space joint bilateral filter would.
+        """
+        if self.tap_brdf and brdf is None:
+            raise ValueError("this learned bilateral kernel has tap_brdf=true: it needs the HR brdf")
         lr, gbuffer = lr.float().clamp_min(0), gbuffer.float()
         n, (height, width) = lr.shape[0], gbuffer.shape[-2:]
         # Where each tap lies against the fixed estimate: outliers (fireflies, the other side of an edge) show here.
         # A pass of its own: keeping the 16 taps for one pass would hold ~1.7 GB at 1080p instead of one tap.
         reference = torch.log1p(joint_bilateral_upsample(lr, gbuffer, **self.ranges))
         context = [self.context(gbuffer[:, :GBUFFER_CHANNELS])] if self.context is not None else []
-        source = torch.cat([lr, torch.log1p(lr)], 1)  # gathered together: the values and their logs
+        source = [lr, torch.log1p(lr)]  # gathered together: the values and their logs (and the taps' log F)
+        if self.tap_brdf:
+            log_brdf = torch.log(brdf.float().clamp_min(1e-4))
+            source.append(point_sample(log_brdf, lr.shape[-2:]))  # F at the LR pixels, as the data demodulated them
+        source = torch.cat(source, 1)
         logits, values = [], []
         for tap in neighbourhood(source, gbuffer, **self.ranges):
             row, col = tap.offset
@@ -94,18 +112,30 @@ class LearnedBilateralUpsample(nn.Module):
                     row.view(1, 1, -1, 1).expand(n, 1, height, width),
                     col.view(1, 1, 1, -1).expand(n, 1, height, width),
                     tap.spatial.expand(n, 1, height, width),
-                    tap.values[:, 3:] - reference,
+                    tap.values[:, 3:6] - reference,
                     *context,
+                    *(
+                        [(tap.values[:, 6:9] - log_brdf).clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT)]
+                        if self.tap_brdf
+                        else []
+                    ),
                 ],
                 1,
             )
-            correction = self.mlp(features).clamp(-_LOGIT_LIMIT, _LOGIT_LIMIT)
+            out = self.mlp(features)
+            correction = out[:, :1].clamp(-_LOGIT_LIMIT, _LOGIT_LIMIT)
             # Taps outside the tent (weight 0) stay out: -inf would make a NaN gradient, a large negative does not.
             base = torch.log(range_weight(tap).clamp_min(1e-30))
             logits.append(torch.where(tap.spatial > 0, base + correction, torch.full_like(base, -1e4)))
-            values.append(tap.values[:, :3])
+            value = tap.values[:, :3]
+            if self.tap_brdf:  # clamp, not a sigmoid: the kernel starts exactly at b = 0, and its gradient flows there
+                exponent = out[:, 1:2].clamp(0.0, 1.0)
+                value = value * torch.exp(
+                    exponent * (tap.values[:, 6:9] - log_brdf).clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT)
+                )
+            values.append(value)
         weights = torch.softmax(torch.stack(logits), 0)
         return (weights * torch.stack(values)).sum(0)
 
-    def forward(self, lr: Tensor, gbuffer: Tensor, **_: Tensor) -> dict:
-        return {"irradiance": self.upsample(lr, gbuffer), "coefficients": None}
+    def forward(self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, **_: Tensor) -> dict:
+        return {"irradiance": self.upsample(lr, gbuffer, brdf), "coefficients": None}

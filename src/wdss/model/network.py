@@ -271,6 +271,7 @@ class WDSSNet(nn.Module):
         residual: str = "none",
         exit_init: float = 0.0,
         residual_input: bool = False,
+        tap_brdf: bool = False,
     ) -> None:
         super().__init__()
         if output_space not in OUTPUT_SPACES:
@@ -278,7 +279,8 @@ class WDSSNet(nn.Module):
         if residual not in RESIDUALS:
             raise ValueError(f"model.residual must be one of {', '.join(RESIDUALS)}, got {residual!r}")
         self.output_space, self.residual = output_space, residual
-        self.upsampler = LearnedBilateralUpsample() if residual == "learned_bilateral" else None
+        # tap_brdf is the learned kernel's option (a per-tap BRDF exponent): without that kernel it changes nothing.
+        self.upsampler = LearnedBilateralUpsample(tap_brdf=tap_brdf) if residual == "learned_bilateral" else None
         if residual_input and residual == "none":
             raise ValueError(
                 "model.residual_input needs a residual upsampler (model.residual: bilinear, joint_bilateral or "
@@ -343,8 +345,8 @@ class WDSSNet(nn.Module):
     @property
     def inputs(self) -> tuple[str, ...]:
         """The batch keys this network consumes (the data side reads exactly what these need)."""
-        keys = ("lr", "gbuffer", "spatial_mask")
-        return keys + (("history", "temporal_mask") if self.temporal else ())
+        keys = ("lr", "gbuffer", "spatial_mask") + (("history", "temporal_mask") if self.temporal else ())
+        return keys + (("brdf",) if self.upsampler is not None and self.upsampler.tap_brdf else ())
 
     def _to_input(self, x: Tensor) -> Tensor:
         return torch.log1p(x.clamp_min(0)) if self.input_log else x
@@ -357,6 +359,7 @@ class WDSSNet(nn.Module):
         scale: Tensor,
         history: Tensor | None = None,
         temporal_mask: Tensor | None = None,
+        brdf: Tensor | None = None,
     ) -> dict[str, Tensor | None]:
         height, width = gbuffer.shape[-2:]
         pad_hr = (0, width % 2, 0, height % 2)
@@ -368,7 +371,7 @@ class WDSSNet(nn.Module):
         guide = gbuffer  # the whole stack: a joint-bilateral residual base reads depth, normal and albedo
         if self.gbuffer_channels is not None:
             gbuffer = gbuffer[:, self.gbuffer_channels]
-        upsampled = self._upsample(lr, guide)
+        upsampled = self._upsample(lr, guide, brdf)
         gb_stack = [gbuffer, spatial_mask] + ([self._to_input(upsampled)] if self.residual_input else [])
         gb_in = F.pixel_unshuffle(_pad(torch.cat(gb_stack, 1), pad_hr), 2)
         lr_fusion, lr_inr = self.lr(lr_in)
@@ -416,14 +419,14 @@ class WDSSNet(nn.Module):
             return torch.expm1(image.clamp(0.0, 20.0))
         return image.clamp_min(0.0)
 
-    def _upsample(self, lr: Tensor, gbuffer: Tensor) -> Tensor | None:
+    def _upsample(self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None) -> Tensor | None:
         """The upsampled LR irradiance the head adds to (linear, HR size), or None without a residual."""
         if self.residual == "none":
             return None
         if self.residual == "bilinear":
             return F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
         if self.upsampler is not None:
-            return self.upsampler.upsample(lr, gbuffer)
+            return self.upsampler.upsample(lr, gbuffer, brdf)
         return joint_bilateral_upsample(lr.float(), gbuffer.float())
 
     def target_coefficients(self, irradiance: Tensor) -> Tensor | None:
