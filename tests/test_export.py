@@ -23,7 +23,11 @@ CONFIGS = {
     "fusion_ll": ["variant=fusion_ll"],
     "dfasr": ["variant=dfasr"],
     "learned_bilateral": ["transform=swt", "basis=db4", "recipe.residual=learned_bilateral", "recipe.output_space=log"],
-}
+    "learned_bilateral_tap_brdf": [
+        "transform=swt", "basis=db4", "recipe.residual=learned_bilateral", "recipe.output_space=log",
+        "recipe.tap_brdf=true",
+    ],
+}  # fmt: skip
 
 
 def compose_export(tmp_path, *overrides: str):
@@ -54,9 +58,22 @@ def check_parity(path, module: SuperResolutionModule, batches: list[dict], toler
     return error
 
 
+def perturb_kernel(ckpt) -> None:
+    """The learned kernel's last layer starts at zero (joint bilateral exactly): give it values, so that parity also
+    covers its logit corrections and BRDF exponents."""
+    state = torch.load(ckpt, weights_only=True)
+    weights = state["state_dict"]
+    g = torch.Generator().manual_seed(0)
+    weights["net.upsampler.mlp.4.weight"] = 0.5 * torch.randn(weights["net.upsampler.mlp.4.weight"].shape, generator=g)
+    weights["net.upsampler.mlp.4.bias"] = torch.full_like(weights["net.upsampler.mlp.4.bias"], 0.5)
+    torch.save(state, ckpt)
+
+
 @pytest.mark.parametrize("name", CONFIGS)
 def test_onnx_graph_matches_torch_on_a_fixture_frame(name, tmp_path):
     ckpt = tiny_checkpoint(tmp_path / "model.ckpt", *CONFIGS[name])
+    if name.startswith("learned_bilateral"):
+        perturb_kernel(ckpt)
     path = export(compose_export(tmp_path, f"ckpt_path={ckpt}", "height=48", "width=96", "scale=2"))
     assert path == tmp_path / "model_96x48_2x.onnx"
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True).eval()
