@@ -57,9 +57,10 @@ def test_inference_table_times_every_backend_with_ratios(capsys):
         assert float(rows["none", backend][2]) == 1.0
 
 
-@pytest.mark.parametrize("residual", ["bilinear", "joint_bilateral"])
+@pytest.mark.parametrize("residual", ["bilinear", "joint_bilateral", "learned_bilateral recipe.tap_brdf=true"])
 def test_learn_trains_the_model_and_a_plain_cnn_on_the_same_batches_from_the_same_start(residual):
-    table = bench.bench_learn(["experiment=smoke", f"recipe.residual={residual}"], steps=2, every=1, held=1, epochs=3)
+    overrides = ["experiment=smoke", *f"recipe.residual={residual}".split()]
+    table = bench.bench_learn(overrides, steps=2, every=1, held=1, epochs=3)
     cells = {column.header: [float(c.rstrip("%")) for c in column._cells] for column in table.columns}
     assert cells["step"] == [0, 1, 2]
     # With a residual and a zero exit both start as the model's upsampling: the same held-out L1.

@@ -500,7 +500,7 @@ class PlainReference(torch.nn.Module):
         if self.upsample is None:
             upsampled = torch.nn.functional.interpolate(batch["lr"], size=size, mode="bilinear")
         else:
-            upsampled = self.upsample(batch["lr"], batch["gbuffer"])
+            upsampled = self.upsample(batch["lr"], batch["gbuffer"], batch.get("brdf"), batch.get("lr_brdf"))
         base = torch.log1p(upsampled.clamp_min(0))
         parts = [base, batch["gbuffer"], batch["spatial_mask"]]
         if "history" in batch:

@@ -28,7 +28,7 @@ from torch import Tensor, nn
 
 from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.dataset import GBUFFER_STACK, Preprocessing
-from wdss.data.sampling import lr_size
+from wdss.data.sampling import lr_size, point_sample
 from wdss.model.blocks import RIRBlock
 from wdss.model.module import SuperResolutionModule
 from wdss.model.profile import dummy_inputs
@@ -109,6 +109,8 @@ def example_inputs(graph: InferenceGraph, height: int, width: int, scale: float)
     """Random inputs of every graph input at an ``height x width`` output and ``scale`` (positive values)."""
     inputs = dummy_inputs(graph.net, height, width, scale)
     inputs["brdf"] = 0.2 + 0.8 * torch.rand(1, 3, height, width)
+    if "lr_brdf" in inputs:  # the F the LR was demodulated with: the HR one at the LR pixels, as in point-sampled data
+        inputs["lr_brdf"] = point_sample(inputs["brdf"], inputs["lr_brdf"].shape[-2:])
     return {k: inputs[k] for k in graph.inputs}
 
 

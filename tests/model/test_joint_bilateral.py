@@ -171,14 +171,20 @@ def test_baseline_runs_through_the_module_without_parameters():
 
 
 def test_the_colour_space_variant_filters_the_lr_colour():
-    """``demodulated=False``: joint bilateral upsampling of the LR colour (irradiance times the F of its own pixel),
-    returned as irradiance of the HR F so that the module's remodulation gives that colour back."""
+    """``demodulated=False``: joint bilateral upsampling of the LR colour, returned as irradiance of the HR F so
+    that the module's remodulation gives that colour back; through the module, on the batch keys it names."""
     torch.manual_seed(0)
     data = batch(size=(15, 21), scale=3.0)
     model = JointBilateralUpsample(demodulated=False)
-    assert model.inputs == ("lr", "gbuffer", "brdf")
-    out = model(data["lr"], data["gbuffer"], brdf=data["brdf"])["irradiance"]
+    assert model.inputs == ("lr_color", "gbuffer", "brdf")
+    out = model(gbuffer=data["gbuffer"], lr_color=data["lr_color"], brdf=data["brdf"])["irradiance"]
     torch.testing.assert_close(out * data["brdf"], joint_bilateral_upsample(data["lr_color"], data["gbuffer"]))
-    with pytest.raises(ValueError, match="demodulated=false needs the HR brdf"):
-        model(data["lr"], data["gbuffer"])
+    with pytest.raises(ValueError, match="demodulated=false needs lr_color and the HR brdf"):
+        model(gbuffer=data["gbuffer"], lr_color=data["lr_color"])
     assert JointBilateralUpsample().inputs == ("lr", "gbuffer")  # the demodulated default needs no F
+    module = SuperResolutionModule(
+        {"_target_": "wdss.model.joint_bilateral.JointBilateralUpsample", "demodulated": False}
+    )
+    assert {"lr_color", "brdf"} <= set(module.inputs) and "lr" not in module.inputs
+    colour = module({k: v for k, v in data.items() if k != "lr"})["color"]
+    torch.testing.assert_close(colour, joint_bilateral_upsample(data["lr_color"], data["gbuffer"]))

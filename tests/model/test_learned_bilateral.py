@@ -122,15 +122,16 @@ def test_with_tap_brdf_it_starts_as_joint_bilateral_and_spans_the_colour_space_k
     torch.manual_seed(0)
     data = batch(size=size, scale=scale)
     model = LearnedBilateralUpsample(tap_brdf=True)
-    assert model.inputs == ("lr", "gbuffer", "brdf")
-    start = model(data["lr"], data["gbuffer"], brdf=data["brdf"])["irradiance"]
+    assert model.inputs == ("lr", "gbuffer", "brdf", "lr_brdf")
+    f = dict(brdf=data["brdf"], lr_brdf=point_sample(data["brdf"], data["lr"].shape[-2:]))  # as data/mini's LR
+    start = model(data["lr"], data["gbuffer"], **f)["irradiance"]
     torch.testing.assert_close(start, joint_bilateral_upsample(data["lr"], data["gbuffer"]), atol=1e-5, rtol=1e-5)
-    colour = _exponent_one(model)(data["lr"], data["gbuffer"], brdf=data["brdf"])["irradiance"] * data["brdf"]
+    colour = _exponent_one(model)(data["lr"], data["gbuffer"], **f)["irradiance"] * data["brdf"]
     torch.testing.assert_close(
         colour, joint_bilateral_upsample(data["lr_color"], data["gbuffer"]), atol=1e-5, rtol=1e-5
     )
-    with pytest.raises(ValueError, match="tap_brdf=true: it needs the HR brdf"):
-        model(data["lr"], data["gbuffer"])
+    with pytest.raises(ValueError, match="tap_brdf=true: it needs the HR brdf and the lr_brdf"):
+        model(data["lr"], data["gbuffer"], brdf=data["brdf"])
 
 
 def test_the_brdf_exponent_is_learned_where_the_target_does_not_follow_the_hr_brdf():
@@ -143,19 +144,20 @@ def test_the_brdf_exponent_is_learned_where_the_target_does_not_follow_the_hr_br
     gbuffer = torch.rand(n, 11, height, width, generator=g)
     brdf = 0.2 + 0.8 * torch.rand(n, 3, height, width, generator=g)
     colour = torch.full((n, 3, height, width), 0.6)
-    lr = point_sample(colour / brdf, lr_size(height, width, scale))  # the data's demodulation at the LR pixels
+    lr_brdf = point_sample(brdf, lr_size(height, width, scale))
+    lr = point_sample(colour, lr_size(height, width, scale)) / lr_brdf  # the data's demodulation at the LR pixels
     model = LearnedBilateralUpsample(tap_brdf=True)
 
     def error() -> float:
         with torch.no_grad():
-            return float((model(lr, gbuffer, brdf=brdf)["irradiance"] * brdf - colour).abs().mean())
+            return float((model(lr, gbuffer, brdf=brdf, lr_brdf=lr_brdf)["irradiance"] * brdf - colour).abs().mean())
 
     before = error()
     assert before > 0.05
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-2)
     for _ in range(60):
         optimizer.zero_grad()
-        F.l1_loss(model(lr, gbuffer, brdf=brdf)["irradiance"] * brdf, colour).backward()
+        F.l1_loss(model(lr, gbuffer, brdf=brdf, lr_brdf=lr_brdf)["irradiance"] * brdf, colour).backward()
         optimizer.step()
     assert error() < 0.2 * before
     without = LearnedBilateralUpsample()  # the logits alone cannot: every tap carries the wrong texture
@@ -175,7 +177,8 @@ def test_with_tap_brdf_the_gradient_reaches_every_parameter():
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-2)
     for step in range(2):
         optimizer.zero_grad()
-        out = model(data["lr"], data["gbuffer"], brdf=data["brdf"])["irradiance"]
+        lr_brdf = point_sample(data["brdf"], data["lr"].shape[-2:])
+        out = model(data["lr"], data["gbuffer"], brdf=data["brdf"], lr_brdf=lr_brdf)["irradiance"]
         (out * data["brdf"] - data["target"].roll(1, -1)).abs().mean().backward()
         if step == 1:
             for name, parameter in model.named_parameters():

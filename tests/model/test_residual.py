@@ -158,13 +158,15 @@ def test_the_learned_kernel_with_tap_brdf_is_the_residual_base_and_is_fed_the_br
     torch.manual_seed(0)
     data = batch(size=(16, 20))
     model = net(residual="learned_bilateral", output_space="log", tap_brdf=True)
-    assert "brdf" in model.inputs and model.upsampler.tap_brdf
+    assert {"brdf", "lr_brdf"} <= set(model.inputs) and model.upsampler.tap_brdf
+    lr_brdf = F.interpolate(data["brdf"], size=data["lr"].shape[-2:], mode="nearest-exact")  # as data/mini's LR
     out = model(
         lr=data["lr"],
         gbuffer=data["gbuffer"],
         spatial_mask=data["spatial_mask"],
         scale=data["scale"],
         brdf=data["brdf"],
+        lr_brdf=lr_brdf,
     )
     expected = joint_bilateral_upsample(data["lr"], data["gbuffer"])  # exponent 0 and a zero exit at the start
     torch.testing.assert_close(out["irradiance"], expected, atol=2e-5, rtol=2e-5)

@@ -176,21 +176,28 @@ class JointBilateralUpsample(nn.Module):
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr", "gbuffer") if self.demodulated else ("lr", "gbuffer", "brdf")
+        return ("lr", "gbuffer") if self.demodulated else ("lr_color", "gbuffer", "brdf")
 
-    def forward(self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, **_: Tensor) -> dict:
-        if not self.demodulated:
-            if brdf is None:
-                raise ValueError("joint bilateral upsampling with demodulated=false needs the HR brdf")
-            # The module remodulates with the HR F: the colour estimate divided by it comes back out unchanged.
-            lr = lr * point_sample(brdf, lr.shape[-2:])
+    def forward(
+        self,
+        lr: Tensor | None = None,
+        gbuffer: Tensor | None = None,
+        lr_color: Tensor | None = None,
+        brdf: Tensor | None = None,
+        **_: Tensor,
+    ) -> dict:
+        if gbuffer is None or (self.demodulated and lr is None):
+            raise ValueError("joint bilateral upsampling needs the gbuffer and (demodulated) lr")
+        if not self.demodulated and (lr_color is None or brdf is None):
+            raise ValueError("joint bilateral upsampling with demodulated=false needs lr_color and the HR brdf")
         upsampled = joint_bilateral_upsample(
-            lr,
+            lr if self.demodulated else lr_color,
             gbuffer,
             sigma_depth=self.sigma_depth,
             sigma_normal=self.sigma_normal,
             sigma_albedo=self.sigma_albedo,
             radius=self.radius,
         )
+        # The module remodulates with the HR F: the colour estimate divided by it comes back out unchanged.
         irradiance = upsampled if self.demodulated else upsampled / brdf
         return {"irradiance": irradiance, "coefficients": None}

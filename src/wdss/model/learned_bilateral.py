@@ -9,8 +9,17 @@ joint-bilateral estimate (optionally also a few convolutional features of the G-
 default: on data/mini they fit the training scenes and generalise worse). The MLP's last layer starts at zero,
 so the module starts as joint bilateral upsampling exactly and learns from there.
 
+``tap_brdf`` (``recipe.tap_brdf``): the MLP also predicts an exponent ``b`` in [0, 1] per pixel and tap, from the
+same features and the log ratio of the tap's BRDF factor to the pixel's, and the tap contributes
+``irradiance_tap * (F_tap / F)^b`` instead of its irradiance: the weights stay a convex combination, the values
+move between the demodulated estimate (0, the start) and the tap's own colour (1). On data/mini's renders a
+colour-space filter beats the demodulated one at geometry edges, where colour is not the BRDF factor times a
+smooth irradiance; the exponent lets the kernel choose per tap. The exponent is a clamp of the output, not a
+sigmoid, so that the start is exact and its gradient flows there; an output pushed below 0 everywhere would stop
+learning it (on data/mini every seed moved it up).
+
 Why: at CPU scale the WDSS network barely leaves its starting point in a few hundred steps, while this kernel
-(625 parameters) learns a correction that generalises to unseen scenes within a hundred (README, "where
+(625 parameters, 690 with ``tap_brdf``) learns a correction that generalises to unseen scenes within a hundred (README, "where
 CPU models stand"). It is the residual base ``recipe.residual=learned_bilateral`` of the network and a model of
 its own (``model=learned_bilateral``), so the two contributions are separate ablation rows.
 """
@@ -20,7 +29,6 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from wdss.data.sampling import point_sample
 from wdss.model.joint_bilateral import check_ranges, joint_bilateral_upsample, neighbourhood, range_weight
 
 __all__ = ["LearnedBilateralUpsample"]
@@ -79,18 +87,21 @@ class LearnedBilateralUpsample(nn.Module):
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr", "gbuffer", "brdf") if self.tap_brdf else ("lr", "gbuffer")
+        return ("lr", "gbuffer", "brdf", "lr_brdf") if self.tap_brdf else ("lr", "gbuffer")
 
-    def upsample(self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None) -> Tensor:
+    def upsample(
+        self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, lr_brdf: Tensor | None = None
+    ) -> Tensor:
         """``lr`` (N, 3, h, w) non-negative irradiance to the grid of ``gbuffer`` (N, 11, H, W): (N, 3, H, W).
 
-        With ``tap_brdf``, ``brdf`` (N, 3, H, W) is the HR BRDF factor the result is remodulated with; each tap's
-        value is then ``irradiance * (F_tap / F)^b``, ``b`` in [0, 1] learned per pixel and tap (0 at the start):
-        0 keeps the demodulated estimate, 1 carries the tap's own colour (``irradiance * F_tap``) through
-        unchanged, as a colour-space joint bilateral filter would.
+        With ``tap_brdf``, ``brdf`` (N, 3, H, W) is the HR BRDF factor the result is remodulated with and ``lr_brdf``
+        (N, 3, h, w) the one ``lr`` was demodulated with; each tap's value is then ``irradiance * (F_tap / F)^b``,
+        ``b`` in [0, 1] learned per pixel and tap (0 at the start): 0 keeps the demodulated estimate, 1 carries the
+        tap's own colour (``irradiance * F_tap``) through unchanged, as a colour-space joint bilateral filter would
+        (where ``F_tap / F`` lies within e^5 either way: the ratio is clamped there).
         """
-        if self.tap_brdf and brdf is None:
-            raise ValueError("this learned bilateral kernel has tap_brdf=true: it needs the HR brdf")
+        if self.tap_brdf and (brdf is None or lr_brdf is None):
+            raise ValueError("this learned bilateral kernel has tap_brdf=true: it needs the HR brdf and the lr_brdf")
         lr, gbuffer = lr.float().clamp_min(0), gbuffer.float()
         n, (height, width) = lr.shape[0], gbuffer.shape[-2:]
         # Where each tap lies against the fixed estimate: outliers (fireflies, the other side of an edge) show here.
@@ -100,7 +111,7 @@ class LearnedBilateralUpsample(nn.Module):
         source = [lr, torch.log1p(lr)]  # gathered together: the values and their logs (and the taps' log F)
         if self.tap_brdf:
             log_brdf = torch.log(brdf.float().clamp_min(1e-4))
-            source.append(point_sample(log_brdf, lr.shape[-2:]))  # F at the LR pixels, as the data demodulated them
+            source.append(torch.log(lr_brdf.float().clamp_min(1e-4)))  # F at the LR pixels, as lr was demodulated
         source = torch.cat(source, 1)
         logits, values = [], []
         for tap in neighbourhood(source, gbuffer, **self.ranges):
@@ -137,5 +148,7 @@ class LearnedBilateralUpsample(nn.Module):
         weights = torch.softmax(torch.stack(logits), 0)
         return (weights * torch.stack(values)).sum(0)
 
-    def forward(self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, **_: Tensor) -> dict:
-        return {"irradiance": self.upsample(lr, gbuffer, brdf), "coefficients": None}
+    def forward(
+        self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, lr_brdf: Tensor | None = None, **_: Tensor
+    ) -> dict:
+        return {"irradiance": self.upsample(lr, gbuffer, brdf, lr_brdf), "coefficients": None}

@@ -346,7 +346,7 @@ class WDSSNet(nn.Module):
     def inputs(self) -> tuple[str, ...]:
         """The batch keys this network consumes (the data side reads exactly what these need)."""
         keys = ("lr", "gbuffer", "spatial_mask") + (("history", "temporal_mask") if self.temporal else ())
-        return keys + (("brdf",) if self.upsampler is not None and self.upsampler.tap_brdf else ())
+        return keys + (("brdf", "lr_brdf") if self.upsampler is not None and self.upsampler.tap_brdf else ())
 
     def _to_input(self, x: Tensor) -> Tensor:
         return torch.log1p(x.clamp_min(0)) if self.input_log else x
@@ -360,6 +360,7 @@ class WDSSNet(nn.Module):
         history: Tensor | None = None,
         temporal_mask: Tensor | None = None,
         brdf: Tensor | None = None,
+        lr_brdf: Tensor | None = None,
     ) -> dict[str, Tensor | None]:
         height, width = gbuffer.shape[-2:]
         pad_hr = (0, width % 2, 0, height % 2)
@@ -371,7 +372,7 @@ class WDSSNet(nn.Module):
         guide = gbuffer  # the whole stack: a joint-bilateral residual base reads depth, normal and albedo
         if self.gbuffer_channels is not None:
             gbuffer = gbuffer[:, self.gbuffer_channels]
-        upsampled = self._upsample(lr, guide, brdf)
+        upsampled = self._upsample(lr, guide, brdf, lr_brdf)
         gb_stack = [gbuffer, spatial_mask] + ([self._to_input(upsampled)] if self.residual_input else [])
         gb_in = F.pixel_unshuffle(_pad(torch.cat(gb_stack, 1), pad_hr), 2)
         lr_fusion, lr_inr = self.lr(lr_in)
@@ -419,14 +420,16 @@ class WDSSNet(nn.Module):
             return torch.expm1(image.clamp(0.0, 20.0))
         return image.clamp_min(0.0)
 
-    def _upsample(self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None) -> Tensor | None:
+    def _upsample(
+        self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, lr_brdf: Tensor | None = None
+    ) -> Tensor | None:
         """The upsampled LR irradiance the head adds to (linear, HR size), or None without a residual."""
         if self.residual == "none":
             return None
         if self.residual == "bilinear":
             return F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
         if self.upsampler is not None:
-            return self.upsampler.upsample(lr, gbuffer, brdf)
+            return self.upsampler.upsample(lr, gbuffer, brdf, lr_brdf)
         return joint_bilateral_upsample(lr.float(), gbuffer.float())
 
     def target_coefficients(self, irradiance: Tensor) -> Tensor | None:
