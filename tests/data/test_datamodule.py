@@ -231,6 +231,21 @@ def test_worker_processes_read_zipped_sequences(root, tmp_path):
     assert len(batches) == 1 and batches[0]["history"].shape == (2, 3, 12, 12)
 
 
+def _first_batch_shape(root: Path) -> tuple[int, ...]:
+    dm = SceneDataModule(root, {"train": ["seq_a"]}, ["target"], patch_size=12, batch_size=2, num_workers=1)
+    dm.setup("fit")
+    return tuple(next(iter(dm.train_dataloader()))["target"].shape)
+
+
+@pytest.mark.slow
+def test_loader_workers_start_inside_a_parallel_launcher_job(root):
+    # hydra/launcher=parallel runs each job in a joblib (loky) worker, whose default start method is "loky".
+    from joblib import Parallel, delayed
+
+    shapes = Parallel(n_jobs=2, backend="loky")([delayed(_first_batch_shape)(root)] * 2)
+    assert shapes == [(2, 3, 12, 12)] * 2
+
+
 def test_prepare_data_makes_a_missing_root_once(tmp_path):
     calls = []
 

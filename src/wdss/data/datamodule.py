@@ -42,6 +42,7 @@ frame is decoded once per loader worker rather than once per patch.
 from __future__ import annotations
 
 import logging
+import multiprocessing
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -79,6 +80,19 @@ def _parse_split(entries: Iterable[Any]) -> tuple[list[str], dict[str, tuple[int
         else:
             raise ValueError(f"data.splits entries are names or {{name, frames: [start, stop]}}, got {entry!r}")
     return names, ranges
+
+
+def worker_context() -> str | None:
+    """The start method for loader workers: the process's own, unless a launcher replaced it.
+
+    A job that joblib's loky backend runs (``hydra/launcher=parallel``) has ``loky`` as its default start method, and
+    loky's ``Popen`` cannot start a plain ``multiprocessing.Process``: the DataLoader's workers would fail to start.
+    There the platform's default (fork on Linux, spawn on macOS) is used, as in a job that runs in the main process.
+    """
+    method = multiprocessing.get_start_method(allow_none=True)
+    if method is None or method in multiprocessing.get_all_start_methods():
+        return None
+    return multiprocessing.get_all_start_methods()[0]
 
 
 class SceneDataModule(L.LightningDataModule):
@@ -260,6 +274,7 @@ class SceneDataModule(L.LightningDataModule):
             num_workers=self.num_workers,
             pin_memory=self.pin_memory,
             persistent_workers=self.num_workers > 0,
+            multiprocessing_context=worker_context() if self.num_workers > 0 else None,
             collate_fn=Collate(dataset.keys, self.prep, dataset.scale, on_device=self._on_device()),
             generator=generator,
         )
