@@ -21,6 +21,7 @@ from wdss.checkpoint import read_checkpoint
 from wdss.data.exr import write_exr
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
+from wdss.progress_bar import progress_bar
 from wdss.targets import check_targets, instantiate
 from wdss.tracking import RUN_ID_FILE, ensure_experiment, prepare_store
 
@@ -103,7 +104,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
     logger = _eval_logger(cfg, ckpt)
-    callbacks = []
+    callbacks = [progress_bar()]
     if cfg.get("write_outputs"):
         callbacks.append(WritePredictions(Path(str(cfg.paths.output_dir)) / "frames"))
     if cfg.get("video"):

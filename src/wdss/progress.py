@@ -2,6 +2,7 @@
 
 A pipe or log file shows no bar, so off a terminal a line ``<label>: <count>/<total> <text>`` is printed for
 every item that comes with a text, and, with ``every_s``, one every ``every_s`` seconds and at the end.
+Training's counterpart is :mod:`wdss.progress_bar`.
 """
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ from __future__ import annotations
 import sys
 import time
 
-__all__ = ["Progress"]
+__all__ = ["Progress", "duration"]
 
 
 class Progress:
@@ -49,3 +50,10 @@ class Progress:
             self._last = time.monotonic()
             words = " ".join(w for w in (self.unit, text) if w)
             print(f"{self.label}: {self.count}/{self.total}{' ' + words if words else ''}", flush=True)
+
+
+def duration(seconds: float) -> str:
+    """``1h02m``, ``1m32s`` or ``45s``."""
+    minutes, secs = divmod(round(seconds), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}h{minutes:02d}m" if hours else f"{minutes}m{secs:02d}s" if minutes else f"{secs}s"

@@ -27,6 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 from wdss.checkpoint import CheckpointError, read_checkpoint
 from wdss.distributed import use_rank_command
 from wdss.paths import CONF_DIR
+from wdss.progress_bar import progress_bar
 from wdss.targets import TargetRefused, check_targets, instantiate
 from wdss.tracking import RUN_ID_FILE, ensure_experiment, prepare_store, reap_dead_runs, run_name, run_tags
 
@@ -158,15 +159,6 @@ def _recorded(run_dir: Path, name: str) -> str | None:
     return file.read_text().strip() if file.exists() else None
 
 
-def _progress_bar() -> L.Callback:
-    from lightning.pytorch.callbacks import RichProgressBar, TQDMProgressBar
-
-    multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
-    if sys.stdout.isatty() and not multirun:
-        return RichProgressBar()
-    return TQDMProgressBar(refresh_rate=20)  # plain lines in logs and sweeps
-
-
 def _flat(config: dict, prefix: str = "") -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in config.items():
@@ -195,7 +187,8 @@ def train(cfg: DictConfig) -> dict[str, float]:
         )
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
     name = run_name(cfg)
-    callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [_progress_bar()]
+    multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
+    callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [progress_bar(multirun=multirun)]
     if cfg.get("video") and cfg.get("test"):
         from wdss.video import SequenceVideos
 

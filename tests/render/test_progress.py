@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from wdss.progress import duration
 from wdss.render import sequence
 
 
@@ -23,4 +24,4 @@ def test_a_log_gets_a_line_per_frame_with_the_rate_and_the_time_left(capsys, mon
 
 
 def test_durations_read_at_a_glance():
-    assert [sequence._duration(s) for s in (0, 45.4, 92, 3600 + 125)] == ["0s", "45s", "1m32s", "1h02m"]
+    assert [duration(s) for s in (0, 45.4, 92, 3600 + 125)] == ["0s", "45s", "1m32s", "1h02m"]

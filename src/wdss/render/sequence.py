@@ -29,6 +29,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from wdss.data.exr import write_exr
 from wdss.data.layouts import UnrealLayout
 from wdss.data.sampling import lr_size, point_sample
+from wdss.progress import duration
 from wdss.render.exposure import auto_exposure
 from wdss.render.scene_file import check_scene, file_digest
 from wdss.render.spec import SceneSpec, camera_pose, intrinsics, random_scene
@@ -332,16 +333,9 @@ class _LineProgress:
         task["done"] += int(advance)
         # Seconds per frame rendered by this run (the scene's set-up included), not counting resumed frames.
         rate = (time.perf_counter() - task["start"]) / max(task["done"] - task["resumed"], 1)
-        eta = _duration(rate * (task["total"] - task["done"]))
+        eta = duration(rate * (task["total"] - task["done"]))
         line = f"render {task['name']}: frame {task['done']}/{task['total']} ({rate:.1f} s/frame, ETA {eta})"
         print(line, flush=True)
-
-
-def _duration(seconds: float) -> str:
-    """``1h02m``, ``1m32s`` or ``45s``."""
-    minutes, secs = divmod(round(seconds), 60)
-    hours, minutes = divmod(minutes, 60)
-    return f"{hours}h{minutes:02d}m" if hours else f"{minutes}m{secs:02d}s" if minutes else f"{secs}s"
 
 
 def preset_settings(name: str) -> dict[str, Any]:

@@ -1,0 +1,118 @@
+"""Lightning's progress bar for a process: rich on a terminal, plain flushed lines in logs, pipes and sweeps.
+
+A tqdm bar written to a file is one endless line of carriage returns; :class:`LineProgressBar` prints a line per
+training epoch with its metrics and ETA, one after each test, and one every ``every_s`` seconds within a loop that
+takes longer.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any
+
+from lightning.pytorch.callbacks import Callback, ProgressBar
+
+from wdss.progress import duration
+
+__all__ = ["LineProgressBar", "progress_bar"]
+
+
+def progress_bar(*, multirun: bool = False) -> Callback:
+    """Lightning's progress bar for this process: rich on a terminal (not in a sweep, whose jobs share the
+    terminal), plain lines otherwise."""
+    if sys.stdout.isatty() and not multirun:
+        from lightning.pytorch.callbacks import RichProgressBar
+
+        return RichProgressBar()
+    return LineProgressBar()
+
+
+class LineProgressBar(ProgressBar):
+    """A progress bar of plain flushed lines, for logs and pipes.
+
+    ``epoch 3/16: 30 batches in 11s, ETA 2m26s, train/loss=0.0715 val/psnr=32.3`` after every training epoch
+    (validation included), ``validate: ...`` / ``test: ...`` after those loops, and ``epoch 3/16: batch 120/400 ...``
+    every ``every_s`` seconds within a loop that takes longer.
+    """
+
+    def __init__(self, every_s: float = 60.0) -> None:
+        super().__init__()
+        self.every_s = every_s
+        self._enabled = True
+        self._start = self._last = time.monotonic()
+        self._train_batches = self._val_batches = self._test_batches = 0
+
+    def disable(self) -> None:
+        self._enabled = False
+
+    def enable(self) -> None:
+        self._enabled = True
+
+    def _print(self, text: str) -> None:
+        if self._enabled:
+            print(text, flush=True)
+
+    def _metrics(self, trainer: Any, pl_module: Any) -> str:
+        items = self.get_metrics(trainer, pl_module).items()
+        return " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in items if k != "v_num")
+
+    def _epoch(self, trainer: Any) -> str:
+        total = f"/{trainer.max_epochs}" if trainer.max_epochs and trainer.max_epochs > 0 else ""
+        return f"epoch {trainer.current_epoch + 1}{total}"
+
+    def _restart(self) -> None:
+        self._start = self._last = time.monotonic()
+
+    def _tick(self, label: str, done: int, total: float, trainer: Any, pl_module: Any) -> None:
+        now = time.monotonic()
+        if now - self._last >= self.every_s:
+            self._last = now
+            of = f"/{total}" if total != float("inf") else ""
+            self._print(
+                f"{label}: batch {done}{of} ({duration(now - self._start)}) {self._metrics(trainer, pl_module)}"
+            )
+
+    def on_train_epoch_start(self, trainer: Any, pl_module: Any) -> None:
+        self._restart()
+        self._train_batches = 0
+
+    def on_train_batch_end(self, trainer: Any, pl_module: Any, *args: Any, **kwargs: Any) -> None:
+        self._train_batches += 1
+        self._tick(self._epoch(trainer), self._train_batches, self.total_train_batches, trainer, pl_module)
+
+    def on_train_epoch_end(self, trainer: Any, pl_module: Any) -> None:
+        elapsed = time.monotonic() - self._start
+        batches = self._train_batches
+        eta = ""
+        if trainer.max_epochs and trainer.max_epochs > 0:
+            eta = f", ETA {duration((trainer.max_epochs - trainer.current_epoch - 1) * elapsed)}"
+        text = f"{self._epoch(trainer)}: {batches} batches in {duration(elapsed)}{eta}"
+        self._print(f"{text}, {self._metrics(trainer, pl_module)}")
+
+    def on_validation_start(self, trainer: Any, pl_module: Any) -> None:
+        self._val_batches = 0
+        if trainer.state.fn == "validate":
+            self._restart()  # inside fit, a validation keeps its epoch's clock
+
+    def on_validation_batch_end(self, trainer: Any, pl_module: Any, *args: Any, **kwargs: Any) -> None:
+        self._val_batches += 1
+        label = "validate" if trainer.state.fn == "validate" else f"{self._epoch(trainer)} validation"
+        if not trainer.sanity_checking:
+            self._tick(label, self._val_batches, self.total_val_batches, trainer, pl_module)
+
+    def on_validation_end(self, trainer: Any, pl_module: Any) -> None:
+        if trainer.state.fn == "validate":
+            elapsed = duration(time.monotonic() - self._start)
+            self._print(f"validate: {self._val_batches} batches in {elapsed}, {self._metrics(trainer, pl_module)}")
+
+    def on_test_start(self, trainer: Any, pl_module: Any) -> None:
+        self._restart()
+        self._test_batches = 0
+
+    def on_test_batch_end(self, trainer: Any, pl_module: Any, *args: Any, **kwargs: Any) -> None:
+        self._test_batches += 1
+        self._tick("test", self._test_batches, sum(trainer.num_test_batches), trainer, pl_module)
+
+    def on_test_end(self, trainer: Any, pl_module: Any) -> None:
+        self._print(f"test: {self._test_batches} batches in {duration(time.monotonic() - self._start)}")
