@@ -9,6 +9,7 @@ and optionally writes every prediction as linear EXR and tone-mapped PNG, and ev
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -115,7 +116,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     from wdss.train import _bench
 
     try:
-        trainer.test(module, datamodule=datamodule)
+        trainer.test(module, datamodule=datamodule, verbose=sys.stdout.isatty())  # the metrics are printed below
         metrics = {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")}
         metrics.update(_bench(cfg, module, logger))
     except BaseException:

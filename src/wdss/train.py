@@ -239,7 +239,11 @@ def train(cfg: DictConfig) -> dict[str, float]:
             metrics["trainer/global_step"] = float(trainer.global_step)
         if cfg.get("test"):
             best = getattr(trainer.checkpoint_callback, "best_model_path", "") if fitting else ""
-            trainer.test(module, datamodule=datamodule, ckpt_path=best or None, weights_only=True)
+            # Lightning's results table is for a terminal: in a log it cuts every cell to fit 80 columns, and the
+            # metrics are printed in full when the run ends
+            trainer.test(
+                module, datamodule=datamodule, ckpt_path=best or None, weights_only=True, verbose=sys.stdout.isatty()
+            )
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")})
         if trainer.is_global_zero:
             metrics.update(_bench(cfg, module, logger))
