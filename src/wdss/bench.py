@@ -441,8 +441,8 @@ def bench_render(
     seeds: Sequence[int], frame: int, size: tuple[int, int], samples: Sequence[int], reference: int
 ) -> Table:
     """Render quality: colour at each sample count (+ OpenImageDenoise, as datasets are rendered) against a
-    ``reference``-sample render of the same frame, PSNR after the metric's tone map at the sequence's auto
-    exposure, and seconds per frame. Needs the ``render`` extra."""
+    ``reference``-sample render of the same frame without denoising, PSNR after the metric's tone map at the
+    sequence's auto exposure, and seconds per frame. Needs the ``render`` extra."""
     import numpy as np
 
     from wdss.data.tonemap import hable
@@ -451,15 +451,18 @@ def bench_render(
     from wdss.render.spec import random_scene
 
     width, height = size
-    table = Table(title=f"render: {width}x{height}, frame {frame}, against {reference} spp + OIDN")
+    table = Table(title=f"render: {width}x{height}, frame {frame}, against {reference} spp without denoising")
     for column in ("seed", "spp", "s/frame", "PSNR (dB)", "high-freq. energy / reference"):
         table.add_column(column, justify="right")
     for seed in seeds:
         scene = BlenderScene(random_scene(seed), samples=reference, denoise=True, filter_width=0.01)
         exposure = auto_exposure(scene.render(0, width, height, samples=8)["Combined"][:3])
+        # The reference is not denoised: a denoiser that smears texture would smear the reference alike and hide it.
+        scene.denoise = False
         start = time.perf_counter()
         ref = torch.from_numpy(scene.render(frame, width, height)["Combined"][None, :3] * exposure)
         ref_seconds = time.perf_counter() - start
+        scene.denoise = True
         ref_ldr = hable(ref)
 
         def detail(x: torch.Tensor) -> float:  # energy of the Laplacian: texture a denoiser smears is lost here
