@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -259,6 +260,28 @@ def test_prepare_data_makes_a_missing_root_once(tmp_path):
     assert calls == [tmp_path / "made"]
     dm.setup("fit")
     assert len(dm.datasets["train"]) == 2
+
+
+@pytest.mark.parametrize(
+    ("settings", "stale"),
+    [
+        ({"denoise": True, "resolution": [384, 216]}, True),  # denoised with OIDN's prefilter
+        ({"denoise": True, "denoise_prefilter": "none", "resolution": [384, 216]}, False),
+        ({"denoise": True, "resolution": [96, 48]}, False),  # under 200 pixels: never prefiltered
+        ({"denoise": False, "resolution": [384, 216]}, False),
+    ],
+)
+def test_a_dataset_rendered_with_the_blurring_denoiser_is_refused_by_name(tmp_path, settings, stale):
+    calls = []
+    write_sequence(tmp_path / "made" / "seq_a", frames=(1, 2), size=(8, 8), scales=())
+    (tmp_path / "made" / "seq_a" / "sequence.json").write_text(json.dumps({"settings": settings}))
+    dm = SceneDataModule(tmp_path / "made", {"train": ["seq_a"]}, ["target"], patch_size=None, prepare=calls.append)
+    if stale:
+        with pytest.raises(SceneError, match=r"made/seq_a was rendered by an earlier wdss: .*prefilter.* Remove "):
+            dm.prepare_data()
+    else:
+        dm.prepare_data()
+    assert calls == []  # never rendered over
 
 
 def test_the_default_data_config_instantiates():

@@ -41,6 +41,7 @@ frame is decoded once per loader worker rather than once per patch.
 
 from __future__ import annotations
 
+import json
 import logging
 import multiprocessing
 from collections.abc import Callable, Iterable, Mapping
@@ -182,8 +183,20 @@ class SceneDataModule(L.LightningDataModule):
 
     def prepare_data(self) -> None:
         # A packed store is read without its EXR source: nothing to render for it.
-        if self.prepare is not None and not self.root.exists() and self.format != "packed":
+        if self.prepare is None or self.format == "packed":
+            return
+        if not self.root.exists():
             self.prepare(self.root)
+            return
+        from wdss.render.sequence import stale_render
+
+        for sidecar in sorted(self.root.glob("*/sequence.json")):  # rendered on first use by an older wdss?
+            why = stale_render(json.loads(sidecar.read_text()))
+            if why:
+                raise SceneError(
+                    f"{sidecar.parent} was rendered by an earlier wdss: {why}. Remove {self.root} and it is "
+                    "rendered again on first use (or: make data)"
+                )
 
     def _sequences(self, split: str, keys: Iterable[str]) -> tuple[list, dict[str, tuple[int, int]]]:
         if split not in self.splits:
