@@ -513,7 +513,9 @@ class PlainReference(torch.nn.Module):
     def forward(self, batch: dict) -> dict:
         base, x = self.inputs(batch)
         irradiance = torch.expm1((base + self.body(x)).clamp(0.0, 20.0))
-        return {"irradiance": irradiance, "color": irradiance * batch["brdf"], "coefficients": None}
+        from wdss.data.preprocess import prediction_color
+
+        return {"irradiance": irradiance, "color": prediction_color(irradiance, batch), "coefficients": None}
 
 
 def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epochs: int) -> Table:

@@ -53,7 +53,11 @@ def _channels(buffer: str) -> list[str]:
 # Engine-facing description of every batch key a graph may take: resolution (high or low), channels in order,
 # meaning. The one contract between data and model (wdss.data.datamodule), written out for another renderer.
 CHANNELS: dict[str, tuple[str, list[str], str]] = {
-    "lr": ("low", list(_RGB), "LR colour / the LR BRDF factor when demodulated (else the LR colour)"),
+    "lr": (
+        "low",
+        list(_RGB),
+        "(LR colour - LR emission) / the LR BRDF factor when demodulated (else the LR colour); see preprocessing",
+    ),
     "lr_color": ("low", list(_RGB), "LR colour"),
     "lr_brdf": ("low", list(_RGB), "LR BRDF factor"),
     "brdf": ("high", list(_RGB), "HR BRDF factor F (1 where F < 1e-4): color = irradiance * brdf"),
@@ -244,11 +248,18 @@ def input_layout(
         },
         "inputs": inputs,
         "outputs": [
-            {"name": "color", "channels": list(_RGB), "description": "HR linear HDR colour = irradiance * brdf"},
+            {
+                "name": "color",
+                "channels": list(_RGB),
+                "description": "HR linear HDR colour = irradiance * brdf"
+                + (" (add the HR emission: the graph does not take it)" if prep.separates_emission else ""),
+            },
             {"name": "irradiance", "channels": list(_RGB), "description": "HR demodulated prediction"},
         ],
         "preprocessing": {
             "demodulate": prep.demodulate,
+            # Emitted radiance subtracted from the colour before demodulation (lr, history) and added to the output
+            "emission_separated": prep.separates_emission,
             "brdf": {
                 "extranet": "F = base_color + (1 - metallic) * 0.08 * specular",
                 "split_sum": "F = base (1 - metallic) + F0 A + B, (A, B) = wdss.data.brdf.ggx_lut(NoV, roughness)",

@@ -38,6 +38,7 @@ from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.dataset import Collate, FrameDataset, Preprocessing
 from wdss.data.exr import ExrError, read_exr, write_exr
 from wdss.data.layouts import SceneError, Sequence
+from wdss.data.preprocess import prediction_color, target_irradiance
 from wdss.model.baselines import Upsample
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
@@ -174,15 +175,16 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
         return written and (not has_target or str(frame) in record.frames)
 
     def read_back(index: int) -> Tensor | None:
-        """The irradiance a finished frame fed forward: its EXR colour over its BRDF factor."""
+        """The irradiance a finished frame fed forward: its EXR colour less its emission, over its BRDF factor."""
         try:
-            brdf = collate([dataset[index]])["brdf"].to(device)
+            batch = collate([dataset[index]])
             frame = dataset.items[index][1]
             planes = read_exr(files(frame)[0], seq.layout.SLOTS["color"].channels)
         except _READ_ERRORS:
             return None
         color = torch.from_numpy(np.stack(list(planes.values())))[None].to(device)
-        return color / brdf
+        known = {k: batch[k].to(device) for k in ("brdf", "emission") if k in batch}
+        return target_irradiance({"target": color, **known})
 
     lr_height = dataset.native_lr(seq)
     done = [frame for _, frame in dataset.items if complete(frame)]
@@ -225,7 +227,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
             reference = batch["target"] if has_target else color  # the display exposure, when it is "auto"
             _save_png(files(frame)[1], _to_uint8(module.tone(color.float(), reference.float())))
             if cfg.compare:
-                base = baseline(brdf=batch["brdf"], lr=batch["lr"])["irradiance"] * batch["brdf"]
+                base = prediction_color(baseline(brdf=batch["brdf"], lr=batch["lr"])["irradiance"], batch)
                 tiles = [module.tone(x.float(), reference.float()) for x in (base, color)]
                 panel = labelled(_to_uint8(torch.cat(tiles, dim=-1)), ("bilinear_demodulated", "prediction"))
                 _save_png(files(frame)[2], panel)

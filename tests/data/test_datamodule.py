@@ -262,22 +262,26 @@ def test_prepare_data_makes_a_missing_root_once(tmp_path):
     assert len(dm.datasets["train"]) == 2
 
 
+EMITS = {"passes": ["emission"]}
+
+
 @pytest.mark.parametrize(
     ("settings", "stale"),
     [
-        ({"denoise": True, "resolution": [384, 216]}, True),  # denoised with OIDN's prefilter
-        ({"denoise": True, "denoise_prefilter": "none", "resolution": [384, 216]}, False),
-        ({"denoise": True, "resolution": [96, 48]}, False),  # under 200 pixels: never prefiltered
-        ({"denoise": False, "resolution": [384, 216]}, False),
+        ({"denoise": True, "resolution": [384, 216], **EMITS}, "prefilter"),  # denoised with OIDN's prefilter
+        ({"denoise": True, "denoise_prefilter": "none", "resolution": [384, 216], **EMITS}, None),
+        ({"denoise": True, "resolution": [96, 48], **EMITS}, None),  # under 200 pixels: never prefiltered
+        ({"denoise": False, "resolution": [384, 216], **EMITS}, None),
+        ({"denoise": False, "resolution": [384, 216]}, "no emission pass"),  # rendered before the emission pass
     ],
 )
-def test_a_dataset_rendered_with_the_blurring_denoiser_is_refused_by_name(tmp_path, settings, stale):
+def test_a_dataset_rendered_by_an_earlier_wdss_is_refused_by_name(tmp_path, settings, stale):
     calls = []
     write_sequence(tmp_path / "made" / "seq_a", frames=(1, 2), size=(8, 8), scales=())
     (tmp_path / "made" / "seq_a" / "sequence.json").write_text(json.dumps({"settings": settings}))
     dm = SceneDataModule(tmp_path / "made", {"train": ["seq_a"]}, ["target"], patch_size=None, prepare=calls.append)
     if stale:
-        with pytest.raises(SceneError, match=r"made/seq_a was rendered by an earlier wdss: .*prefilter.* Remove "):
+        with pytest.raises(SceneError, match=rf"made/seq_a was rendered by an earlier wdss: .*{stale}.* Remove "):
             dm.prepare_data()
     else:
         dm.prepare_data()
@@ -397,3 +401,58 @@ def test_two_ddp_ranks_share_every_epoch_disjointly_as_a_function_of_seed_and_ep
     assert shares(0, shuffle=False, size=5, repeats=1) == [[(0, 0), (1, 0)], [(2, 0), (3, 0), (4, 0)]]
     with pytest.raises(ValueError, match="1 samples cannot be shared among 2 processes"):
         EpochSampler(1, world_size=2, rank=0)
+
+
+# ---------------------------------------------------------------------------------------------- emission
+
+
+def _irradiance(frame: int, height: int, width: int) -> torch.Tensor:
+    """The synthetic scene's analytic irradiance (wdss.data.synthetic), motion (1, -1): the oracle."""
+    v, u = torch.meshgrid(
+        torch.arange(height, dtype=torch.float64), torch.arange(width, dtype=torch.float64), indexing="ij"
+    )
+    tu, tv = u - frame, v - frame
+    return torch.stack([0.2 + 1.5 * (0.5 + 0.5 * torch.sin(0.11 * tu + 0.07 * tv + c)) for c in range(3)])[None]
+
+
+@pytest.mark.parametrize("layout", ["unreal", "dfasr"])
+def test_emission_is_taken_out_before_demodulation_and_comes_back_at_high_resolution(tmp_path, layout):
+    from wdss.data.preprocess import prediction_color, target_irradiance
+
+    write_sequence(tmp_path / "glow", layout=layout, frames=(1, 2), size=HR, scales=(2,), emission=True)
+    keys = ["lr", "brdf", "target", "emission", "history"]
+    dataset = FrameDataset([Sequence(tmp_path / "glow")], keys, scale=2.0, first_frame="zeros")
+    batch = Collate(dataset.keys, dataset.prep, 2.0)([dataset[1]])  # frame 2
+    emission = batch["emission"]
+    glow = (emission[0, 0] == 2.0) & (batch["brdf"][0, 0] != 1.0)  # the textured emitter (F is not replaced by 1)
+    assert glow.sum() > 10 and emission.abs().sum() > 0
+    truth = _irradiance(2, *HR).float()
+    # At HR: what the data says the target's irradiance is, is the analytic one, on the emitter too.
+    surface = batch["brdf"][0, 0] != 1.0
+    torch.testing.assert_close(target_irradiance(batch)[..., surface], truth[..., surface], rtol=1e-4, atol=1e-5)
+    # At LR (the native 12P folder, point samples of HR): the irradiance of the LR pixels, emitters included.
+    lr_truth = point_sample(truth, batch["lr"].shape[-2:])
+    lr_surface = point_sample(surface[None, None].float(), batch["lr"].shape[-2:])[0, 0] > 0
+    torch.testing.assert_close(batch["lr"][..., lr_surface], lr_truth[..., lr_surface], rtol=1e-4, atol=1e-5)
+    # The history of frame 1, warped, is its irradiance without emission too (no 2 / F on the emitter).
+    assert float(batch["history"][..., glow].max()) < 2.0
+    # Remodulating the true irradiance gives the target back, emission included.
+    torch.testing.assert_close(prediction_color(target_irradiance(batch), batch), batch["target"], rtol=1e-5, atol=1e-5)
+    # Without separation the emitter's irradiance holds 2 / F: far from the truth.
+    whole = FrameDataset([Sequence(tmp_path / "glow")], keys, scale=2.0, preprocessing=Preprocessing(emission=False))
+    plain = Collate(whole.keys, whole.prep, 2.0)([whole[0]])
+    assert "emission" not in plain and float((plain["lr"] - batch["lr"]).abs().max()) > 1.0
+
+
+def test_a_sequence_without_emission_emits_nothing_unless_emission_is_required(root):
+    keys = ["lr", "brdf", "target", "emission"]
+    dataset = FrameDataset([Sequence(root / "seq_a")], keys, scale=2.0)  # written without the buffer
+    assert dataset.no_emission == {"seq_a"}
+    batch = Collate(dataset.keys, dataset.prep, 2.0)([dataset[0]])
+    assert batch["emission"].shape == batch["target"].shape and batch["emission"].abs().sum() == 0
+    whole = FrameDataset([Sequence(root / "seq_a")], keys, scale=2.0, preprocessing=Preprocessing(emission=False))
+    torch.testing.assert_close(Collate(whole.keys, whole.prep, 2.0)([whole[0]])["lr"], batch["lr"])
+    with pytest.raises(SceneError, match=r"seq_a have no emission buffer .*emission=true"):
+        FrameDataset([Sequence(root / "seq_a")], keys, scale=2.0, preprocessing=Preprocessing(emission=True))
+    with pytest.raises(ValueError, match="emission must be true, false or auto"):
+        Preprocessing(emission="yes")

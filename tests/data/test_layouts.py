@@ -24,7 +24,7 @@ FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "rendered" / "fixtu
 @pytest.fixture(scope="module", params=["unreal", "dfasr"])
 def scene(request, tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp(f"scene_{request.param}")
-    write_sequence(root / "seq", layout=request.param, frames=(1, 2, 3), size=HR, scales=(2, 3))
+    write_sequence(root / "seq", layout=request.param, frames=(1, 2, 3), size=HR, scales=(2, 3), emission=True)
     return root / "seq"
 
 

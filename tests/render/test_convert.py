@@ -50,6 +50,7 @@ def test_to_buffers_conventions():
         "basecolor": np.full((4, height, width), 0.4),
         "roughness": np.full((1, height, width), 0.3),
         "metallic": np.ones((1, height, width)),
+        "Emission": np.full((4, height, width), 2.0),
     }
     camera = np.eye(4)
     camera[:3, 3] = [0, 0, 10]  # camera above the origin, looking down -z at the surface point (0, 0, 0)
@@ -60,6 +61,8 @@ def test_to_buffers_conventions():
     assert out["base_color"][:, 0].max() == 0 and out["normal"][:, 0].max() == 0
     np.testing.assert_allclose(out["motion"][:, 1:], np.tile(np.array([-3.0, 4.0]).reshape(2, 1, 1), (1, 3, width)))
     np.testing.assert_allclose(out["nov"][0, 1:], 1.0)
+    assert out["emission"].shape == (3, height, width)  # RGB of the RGBA pass; none on the background (the sky)
+    assert out["emission"][:, 0].max() == 0 and out["emission"][:, 1:].min() == 2.0
 
 
 def test_fixture_is_small_and_complete():

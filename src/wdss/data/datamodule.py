@@ -54,7 +54,7 @@ from torch.utils.data import DataLoader
 
 from wdss.data.cache import FrameCache
 from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing, requirements
-from wdss.data.layouts import SceneError, Sequence, discover_sequences
+from wdss.data.layouts import OPTIONAL_BUFFERS, SceneError, Sequence, discover_sequences
 from wdss.data.packed import PackedSequence, discover_packed, is_packed
 from wdss.data.preprocess import RawBatch
 
@@ -234,6 +234,9 @@ class SceneDataModule(L.LightningDataModule):
                 log.warning("data.format=auto: reading %s from EXR files: %s", name, err)
             else:
                 missing = sorted(b for b in need if not packed.has(b, packed.hr))
+                if set(missing) <= set(OPTIONAL_BUFFERS):  # absent from the EXR files too: the copy holds all there is
+                    source = discover_sequences(self.root, [name], self.layout)[0]
+                    missing = [b for b in missing if source.has(b, source.hr)]
                 changed = packed.stale()
                 if not missing and not changed:
                     return packed

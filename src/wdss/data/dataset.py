@@ -55,6 +55,7 @@ BATCH_KEYS = (
     "prev_lr_color",
     "prev_lr_gbuffer",
     "history2",
+    "emission",
 )
 _MASK_BUFFERS = {"depth", "normal", "base_color"}
 _WARPED = {"history", "temporal_mask", "history2"}  # keys that warp previous frames by the motion vectors
@@ -72,12 +73,16 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
         raise ValueError(f"unknown batch keys {sorted(unknown)}: expected some of {', '.join(BATCH_KEYS)}")
     need: dict[str, set[str]] = {role: set() for role in ROLES}
     brdf = prep.brdf_buffers
+    # Where emission is separated, every colour that is demodulated loses its emitted part first.
+    emitted = {"emission"} if prep.separates_emission else set()
+    if "emission" in keys:
+        need["hr"] |= emitted
     if "target" in keys:
         need["hr"] |= {"color"}
     if "brdf" in keys:
         need["hr"] |= brdf
     if "lr" in keys:
-        need["lr"] |= {"color"} | (brdf if prep.demodulate else set())
+        need["lr"] |= {"color"} | (brdf | emitted if prep.demodulate else set())
     if "lr_color" in keys:
         need["lr"] |= {"color"}
     if "lr_brdf" in keys:
@@ -88,7 +93,7 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
         need["hr"] |= _MASK_BUFFERS
         need["lr"] |= _MASK_BUFFERS
     if "history" in keys:
-        need["prev"] |= {"color"} | (brdf if prep.demodulate else set())
+        need["prev"] |= {"color"} | (brdf | emitted if prep.demodulate else set())
         need["hr"] |= {"motion"}
     if "temporal_mask" in keys:
         need["hr"] |= _MASK_BUFFERS | {"motion"}
@@ -102,7 +107,7 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
     if "prev_lr_gbuffer" in keys:
         need["prev_lr"] |= {"depth", "normal"}
     if "history2" in keys:
-        need["prev2"] |= {"color"} | (brdf if prep.demodulate else set())
+        need["prev2"] |= {"color"} | (brdf | emitted if prep.demodulate else set())
         need["prev"] |= {"motion"}
         need["hr"] |= {"motion"}
     return need
@@ -148,6 +153,7 @@ class FrameDataset(Dataset):
         self.seed = seed
         self.need = requirements(self.keys, self.prep)
         self.warps = bool(_WARPED & set(self.keys))
+        self.no_emission = self._check_emission()
         back = max((_OFFSET[role] for role, buffers in self.need.items() if buffers), default=0)
         self.items: list[tuple[int, int]] = []
         for index, seq in enumerate(self.sequences):
@@ -172,6 +178,21 @@ class FrameDataset(Dataset):
 
     def __len__(self) -> int:
         return len(self.items)
+
+    def _check_emission(self) -> set[str]:
+        """The sequences without an emission buffer, where one is read: they emit nothing (``emission=auto``), or
+        they are an error naming them (``emission=true``)."""
+        if not any("emission" in buffers for buffers in self.need.values()):
+            return set()
+        missing = {seq.name for seq in self.sequences if not seq.has("emission", seq.hr)}
+        if missing and self.prep.emission is True:
+            raise SceneError(
+                f"sequence(s) {', '.join(sorted(missing))} have no emission buffer (Emissive.NNNN.exr), which "
+                "data.preprocessing.emission=true requires; set it to auto (they then emit nothing) or false"
+            )
+        for name in sorted(missing):
+            log.info("sequence %r has no emission buffer: its colour is demodulated whole (as if nothing emits)", name)
+        return missing
 
     def native_lr(self, seq: Sequence) -> int | None:
         """The native low-resolution folder that matches a fixed scale, if any."""
@@ -218,6 +239,8 @@ class FrameDataset(Dataset):
             if role in _HR_OF and "depth" in buffers and prep.depth_normalize:
                 out["ranges"][role] = out["ranges"][_HR_OF[role]]
             want_range = ranged.get(role, False)
+            emits_nothing = "emission" in buffers and seq.name in self.no_emission
+            buffers = buffers - {"emission"} if emits_nothing else buffers
             if not buffers and not want_range:
                 out[role] = {}
                 continue
@@ -234,6 +257,9 @@ class FrameDataset(Dataset):
             else:  # history before the first frame, kept with zeros (first_frame="zeros"): they stay zero when cleaned
                 h, w = box[2:] if box is not None else seq.shape(height)
                 raw, found = {b: np.zeros((BUFFERS[b], h, w), np.float32) for b in buffers}, (0.0, 1.0)
+            if emits_nothing:
+                h, w = box[2:] if box is not None else seq.shape(height)
+                raw["emission"] = np.zeros((3, h, w), raw["color"].dtype if "color" in raw else np.float32)
             # Half buffers stay half up to the preprocessing (half the bytes to move); normals are mirrored in float.
             out[role] = {
                 k: torch.from_numpy(v).float() if k == "normal" else torch.from_numpy(v) for k, v in raw.items()

@@ -14,7 +14,8 @@ convention inside it. Two are known, and a renderer that writes one of them need
 
 Buffers (channels): ``color`` 3 (linear HDR radiance), ``base_color`` 3, ``depth`` 1, ``normal`` 3 (world
 space), ``specular`` 1, ``metallic`` 1, ``roughness`` 1, ``nov`` 1, ``motion`` 2 (high-resolution pixels,
-current minus previous screen position, y up).
+current minus previous screen position, y up), ``emission`` 3 (optional: the emitted radiance of directly visible
+surfaces, part of ``color``; ``Emissive.NNNN.exr`` in either layout, written by wdss's renderer).
 
 Reading opens only the files that hold a requested buffer, each at most once per call, and returns only the
 requested channels; a requested buffer that is missing is an error naming sequence, frame, file and channel.
@@ -44,6 +45,7 @@ __all__ = [
     "BUFFERS",
     "DEFAULT_FRAME_RATE",
     "DFASRLayout",
+    "OPTIONAL_BUFFERS",
     "SceneError",
     "SceneLayout",
     "Sequence",
@@ -65,7 +67,10 @@ BUFFERS: dict[str, int] = {
     "roughness": 1,
     "nov": 1,
     "motion": 2,
+    "emission": 3,
 }
+# Buffers a sequence may lack (the authors' and DFASR's captures have no emission): read as absent, not an error.
+OPTIONAL_BUFFERS = ("emission",)
 
 log = logging.getLogger(__name__)
 
@@ -230,6 +235,7 @@ class UnrealLayout(SceneLayout):
         "motion": Slot("MV_Roughness_NOV", ("R", "G")),
         "roughness": Slot("MV_Roughness_NOV", ("B",)),
         "nov": Slot("MV_Roughness_NOV", ("A",)),
+        "emission": Slot("Emissive", ("R", "G", "B")),  # wdss's renderer; not in the authors' captures
     }
     _FOLDER = re.compile(r"^(\d+)P$")
 
@@ -260,6 +266,7 @@ class DFASRLayout(SceneLayout):
         "roughness": Slot("MotionVectorAndMetallicAndRoughness", ("A",)),
         "nov": Slot("NoV", ("R",)),
         "specular": Slot("Specular", ("R",)),
+        "emission": Slot("Emissive", ("R", "G", "B")),  # optional: not in DFASR's published data
     }
     _FOLDER = re.compile(r"^(GBuffer|Nojitter)-(\d+)P$")
     _STEMS = sorted({s.stem for s in SLOTS.values()}, key=len, reverse=True)

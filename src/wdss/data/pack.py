@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from wdss.data.exr import read_exr
-from wdss.data.layouts import BUFFERS, SceneError, Sequence, discover_sequences
+from wdss.data.layouts import BUFFERS, OPTIONAL_BUFFERS, SceneError, Sequence, discover_sequences
 from wdss.data.packed import (
     CODECS,
     FORMAT,
@@ -168,6 +168,8 @@ def pack_sequence(
         raise ValueError(f"tile must be 0 (whole frames) or at least 8 pixels, got {tile}")
     folder = Path(folder)
     wanted = [b for b in BUFFERS if seq.has(b, seq.hr)] if buffers is None else list(dict.fromkeys(buffers))
+    # An optional buffer a sequence lacks is packed as absent: reading treats it so (it emits nothing).
+    wanted = [b for b in wanted if b not in OPTIONAL_BUFFERS or seq.has(b, seq.hr)]
     for buffer in wanted:
         if buffer not in BUFFERS:
             raise SceneError(f"unknown buffer {buffer!r}: expected one of {', '.join(BUFFERS)}")

@@ -15,7 +15,7 @@ patch is history, not zeros; the warp samples them with that offset.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -26,7 +26,18 @@ from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf, split_sum_brdf
 from wdss.data.sampling import lr_size, point_sample
 from wdss.data.warp import normalize_normals, spatial_mask, temporal_mask, warp_backward
 
-__all__ = ["GBUFFER_STACK", "Preprocessing", "RawBatch", "brdf_of", "build_batch", "clean", "depth_range"]
+__all__ = [
+    "GBUFFER_STACK",
+    "Preprocessing",
+    "RawBatch",
+    "brdf_of",
+    "build_batch",
+    "clean",
+    "depth_range",
+    "lit",
+    "prediction_color",
+    "target_irradiance",
+]
 
 # The high-resolution G-buffer stack of the network, in channel order (11 channels).
 GBUFFER_STACK = ("base_color", "depth", "normal", "specular", "roughness", "nov", "metallic")
@@ -38,6 +49,10 @@ class Preprocessing:
 
     brdf: str = "extranet"  # extranet | split_sum
     demodulate: bool = True  # lr and history are irradiance (colour / F) rather than colour
+    # Emitted light (the emission buffer) is subtracted from the colour before demodulation and added back at
+    # high resolution: an emitter's colour is not F times an irradiance. true: every sequence must have the
+    # buffer; auto: where a sequence has it (others emit nothing); false: never (the paper's demodulation).
+    emission: bool | str = "auto"
     depth_far: float | None = 100.0  # depth beyond this is background: set to 0 (the authors' loader)
     depth_normalize: bool = True  # per-frame min-max normalisation of depth (DFASR); LR by its HR frame's range
     color_max: float | None = None  # clip HDR colour to [0, color_max] at load (the authors used 10)
@@ -47,6 +62,13 @@ class Preprocessing:
     def __post_init__(self) -> None:
         if self.brdf not in ("extranet", "split_sum"):
             raise ValueError(f"data.preprocessing.brdf must be 'extranet' or 'split_sum', got {self.brdf!r}")
+        if self.emission not in (True, False, "auto"):
+            raise ValueError(f"data.preprocessing.emission must be true, false or auto, got {self.emission!r}")
+
+    @property
+    def separates_emission(self) -> bool:
+        """Whether the emission buffer is read: subtracted before demodulation, added back to the prediction."""
+        return self.demodulate and self.emission is not False
 
     @property
     def brdf_buffers(self) -> set[str]:
@@ -155,6 +177,29 @@ def brdf_of(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
     return safe_brdf(raw)
 
 
+def lit(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
+    """The colour less its emitted part (where emission is separated): what is F times an irradiance. Clamped at 0:
+    a denoised colour may fall a little below its exact emission."""
+    if not prep.separates_emission:
+        return buffers["color"]
+    return (buffers["color"] - buffers["emission"]).clamp_min(0.0)
+
+
+def prediction_color(irradiance: Tensor | None, batch: Mapping[str, Tensor]) -> Tensor | None:
+    """A predicted irradiance remodulated with the batch's HR BRDF factor, plus its HR emission where the data
+    separates emission (``None`` stays ``None``: display-space models predict no irradiance)."""
+    if irradiance is None:
+        return None
+    color = irradiance * batch["brdf"]
+    return color + batch["emission"] if "emission" in batch else color
+
+
+def target_irradiance(batch: Mapping[str, Tensor]) -> Tensor:
+    """The HR target's irradiance, what :func:`prediction_color` remodulates: (target - emission) / F."""
+    target = batch["target"] - batch["emission"] if "emission" in batch else batch["target"]
+    return target / batch["brdf"]
+
+
 def build_batch(
     keys: Iterable[str],
     roles: dict[str, dict[str, Tensor]],
@@ -173,10 +218,12 @@ def build_batch(
         batch["target"] = hr["color"]
     if "brdf" in keys:
         batch["brdf"] = brdf_of(hr, prep)
+    if "emission" in keys and prep.separates_emission:
+        batch["emission"] = hr["emission"]
     if "lr" in keys or "lr_brdf" in keys:
         lr_brdf = brdf_of(lr, prep) if (prep.demodulate or "lr_brdf" in keys) else None
         if "lr" in keys:
-            batch["lr"] = demodulate(lr["color"], lr_brdf) if prep.demodulate else lr["color"]
+            batch["lr"] = demodulate(lit(lr, prep), lr_brdf) if prep.demodulate else lr["color"]
         if "lr_brdf" in keys:
             batch["lr_brdf"] = lr_brdf
     if "lr_color" in keys:
@@ -191,7 +238,7 @@ def build_batch(
     if "history" in keys or "temporal_mask" in keys:
         motion = hr["motion"]
         if "history" in keys:
-            previous = demodulate(prev["color"], brdf_of(prev, prep)) if prep.demodulate else prev["color"]
+            previous = demodulate(lit(prev, prep), brdf_of(prev, prep)) if prep.demodulate else prev["color"]
             batch["history"] = warp_backward(previous, motion, origin=(m1, m1))
         if "temporal_mask" in keys:
             names = ("depth", "base_color", "normal")
@@ -208,7 +255,7 @@ def build_batch(
         batch["prev_lr_gbuffer"] = torch.cat([prev_lr["depth"], prev_lr["normal"]], dim=1)
     if "history2" in keys:  # frame t-2 warped to t-1 (on t-1's window), then to t
         prev2 = roles["prev2"]
-        older = demodulate(prev2["color"], brdf_of(prev2, prep)) if prep.demodulate else prev2["color"]
+        older = demodulate(lit(prev2, prep), brdf_of(prev2, prep)) if prep.demodulate else prev2["color"]
         onto_prev = warp_backward(older, prev["motion"], origin=(m2 - m1, m2 - m1))
         batch["history2"] = warp_backward(onto_prev, hr["motion"], origin=(m1, m1))
     return batch

@@ -1,8 +1,10 @@
 """Synthetic scenes with known content, written in either layout: for tests, benchmarks and smoke runs.
 
 The content is analytic: a textured plane translating by ``motion`` pixels per frame (so the motion vectors
-are exact), a black, emissive patch (F = 0, colour 5: it must pass through demodulation), depth beyond the
-far plane in one corner, and irradiance = colour / F known everywhere else. Low-resolution folders are
+are exact), a black, emissive patch (F = 0, colour 5: it must pass through demodulation), a textured emissive
+patch (colour = irradiance * F + 2: only the emission buffer tells the two parts apart), depth beyond the far
+plane in one corner, and irradiance = (colour - emission) / F known everywhere else. The emission buffer is
+written only when asked (``emission=True``): the authors' and DFASR's data have none. Low-resolution folders are
 nearest-exact point samples of the high-resolution buffers, as in the authors' data.
 """
 
@@ -50,6 +52,12 @@ def synthetic_frame(frame: int, height: int, width: int, motion: tuple[float, fl
         buf[:, emitter] = 0.0
     metallic[:, emitter] = 0.0
     color[:, emitter] = 5.0
+    # A textured surface that also emits: demodulating its colour whole would divide the emission by F.
+    glow = (np.abs(tu - width / 4) < width / 10) & (np.abs(tv - 3 * height / 4) < height / 10) & ~emitter
+    emission = np.zeros_like(color)
+    emission[:, emitter] = 5.0
+    emission[:, glow] = 2.0
+    color = color + np.where(glow, 2.0, 0.0)
     # Background beyond the far plane in the top-left corner of the screen (does not move).
     sky = (u < width / 6) & (v < height / 6)
     depth[:, sky] = 1e4
@@ -63,6 +71,7 @@ def synthetic_frame(frame: int, height: int, width: int, motion: tuple[float, fl
         "roughness": roughness,
         "nov": nov,
         "motion": np.broadcast_to(np.array(motion).reshape(2, 1, 1), (2, height, width)).copy(),
+        "emission": emission,
     }
     return {k: v.astype(np.float32) for k, v in buffers.items()}
 
@@ -74,6 +83,8 @@ def _downsample(buffers: dict[str, np.ndarray], size: tuple[int, int]) -> dict[s
 def _write_unreal(folder: Path, frame: int, buffers: dict[str, np.ndarray], compression: str, half: bool) -> None:
     files: dict[str, dict[str, np.ndarray]] = {}
     for buffer, slot in UnrealLayout.SLOTS.items():
+        if buffer not in buffers:
+            continue
         for channel, plane in zip(slot.channels, buffers[buffer], strict=True):
             files.setdefault(slot.stem, {})[channel] = plane
     for stem, channels in files.items():
@@ -104,24 +115,28 @@ def write_sequence(
     half: bool = False,
     cameras: bool = False,
     seed: int = 0,
+    emission: bool = False,
 ) -> Path:
-    """Write one synthetic sequence folder in ``layout`` (``unreal`` or ``dfasr``) and return its path."""
+    """Write one synthetic sequence folder in ``layout`` (``unreal`` or ``dfasr``) and return its path; with
+    ``emission``, the emission buffer too."""
     path = Path(path)
     height, width = size
     low = [lr_size(height, width, s) for s in scales]
     for frame in frames:
         hr = synthetic_frame(frame, height, width, motion, seed)
+        if not emission:
+            del hr["emission"]
         if layout == "unreal":
             _write_unreal(path / f"{height}P", frame, hr, compression, half)
             for lr_hw in low:
                 _write_unreal(path / f"{lr_hw[0]}P", frame, _downsample(hr, lr_hw), compression, half)
         elif layout == "dfasr":
-            gbuffers = [b for b in DFASRLayout.SLOTS if b != "color"]
+            gbuffers = [b for b in DFASRLayout.SLOTS if b != "color" and b in hr]
             _write_dfasr(path / f"GBuffer-{height}P", "Synthetic", frame, hr, gbuffers, compression)
             _write_dfasr(path / f"Nojitter-{height}P", "Synthetic", frame, hr, ["color"], compression)
             for lr_hw in low:
                 lr = _downsample(hr, lr_hw)
-                _write_dfasr(path / f"Nojitter-{lr_hw[0]}P", "Synthetic", frame, lr, DFASRLayout.SLOTS, compression)
+                _write_dfasr(path / f"Nojitter-{lr_hw[0]}P", "Synthetic", frame, lr, list(lr), compression)
         else:
             raise ValueError(f"unknown layout {layout!r}: expected unreal or dfasr")
     if cameras:

@@ -16,6 +16,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from torch import Tensor, nn
 
+from wdss.data.preprocess import prediction_color, target_irradiance
 from wdss.data.tonemap import ToneMap
 from wdss.data.warp import warp_backward
 from wdss.model.losses import WDSSLoss
@@ -121,7 +122,8 @@ class SuperResolutionModule(L.LightningModule):
     @property
     def inputs(self) -> tuple[str, ...]:
         """Batch keys to ask the data for: the network's, the BRDF, the target and (for masked L1) the mask."""
-        keys = set(self.net.inputs) | {"brdf", "target"}
+        # The emission comes back at high resolution wherever the data separates it (data.preprocessing.emission).
+        keys = set(self.net.inputs) | {"brdf", "target", "emission"}
         if self.criterion.weights.get("masked_l1"):
             keys.add("spatial_mask")
         if self.temporal == "recurrent":  # the history is the model's own previous output, warped
@@ -138,7 +140,7 @@ class SuperResolutionModule(L.LightningModule):
         wanted = {k: batch[k] for k in self._forward_args if k in batch}
         out = dict(self.net(**wanted))
         # Single-image baselines return a display image (tone-mapped space) instead of irradiance.
-        out["color"] = out["irradiance"] * batch["brdf"] if out.get("irradiance") is not None else None
+        out["color"] = prediction_color(out.get("irradiance"), batch)
         return out
 
     # ------------------------------------------------------------------------------------------ steps
@@ -151,7 +153,7 @@ class SuperResolutionModule(L.LightningModule):
             return self.criterion(out["display"], target, spatial_mask=batch.get("spatial_mask"))
         target_coefficients = None
         if out.get("coefficients") is not None and self.criterion.weights.get("wavelet"):
-            target_coefficients = self.net.target_coefficients(batch["target"] / batch["brdf"])
+            target_coefficients = self.net.target_coefficients(target_irradiance(batch))
         return self.criterion(
             out["color"],
             batch["target"],
@@ -408,6 +410,10 @@ def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None],
     if lr_source is None and "lr" in batch:
         lr_brdf = torch.nn.functional.interpolate(batch["brdf"][:1], size=batch["lr"].shape[-2:], mode="nearest")
         lr_source = batch["lr"][:1] * lr_brdf
+        if "emission" in batch:
+            lr_source = lr_source + torch.nn.functional.interpolate(
+                batch["emission"][:1], size=lr_source.shape[-2:], mode="nearest"
+            )
     lr = (
         torch.zeros_like(target)
         if lr_source is None

@@ -211,7 +211,16 @@ def configure_cycles(scene, layer, *, seed: int, threads: int = 0) -> None:
     else:  # all cores, whatever a .blend fixed
         scene.render.threads_mode = "AUTO"
     scene.render.film_transparent = False
-    for flag in ("use_pass_combined", "use_pass_z", "use_pass_normal", "use_pass_vector", "use_pass_position"):
+    # Emit: the emission of directly visible surfaces, the part of the colour that is not BRDF times irradiance.
+    flags = (
+        "use_pass_combined",
+        "use_pass_z",
+        "use_pass_normal",
+        "use_pass_vector",
+        "use_pass_position",
+        "use_pass_emit",
+    )
+    for flag in flags:
         setattr(layer, flag, True)
     present = {aov.name: aov for aov in layer.aovs}
     for name, kind in AOVS:

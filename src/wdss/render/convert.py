@@ -15,6 +15,9 @@ Conventions (REFERENCE.md section 5, verified on bpy 5.0.1):
 * ``specular`` is 0.5 on surfaces (Unreal's default) and 0 on the background, so the sky's BRDF factor
   is 0 and it passes through demodulation instead of being divided by 0.04.
 * ``nov``: the cosine between the normal and the direction to the camera, from the Position pass.
+* Emission (``use_pass_emit``): the emission of directly visible surfaces (noise-free: a material's emission is
+  evaluated where the camera ray hits) -> ``emission``, 0 on the background (the sky is in the colour, not
+  here). Demodulation subtracts it first, as emitted light is not the BRDF factor times an irradiance.
 """
 
 from __future__ import annotations
@@ -68,7 +71,7 @@ def to_buffers(
     """The Unreal-layout buffers ``(C, H, W)`` float32 of one rendered frame.
 
     ``passes`` maps Blender pass names (``Combined``, ``Depth``, ``Normal``, ``Vector``, ``Position``,
-    ``basecolor``, ``roughness``, ``metallic``) to ``(C, H, W)`` arrays. ``motion_scale`` converts the
+    ``basecolor``, ``roughness``, ``metallic``, ``Emission``) to ``(C, H, W)`` arrays. ``motion_scale`` converts the
     rendered resolution's pixels to high-resolution pixels (s for a natively rendered low-resolution frame).
     """
     depth = passes["Depth"][:1].astype(np.float64)
@@ -96,5 +99,6 @@ def to_buffers(
         "roughness": np.where(surface, passes["roughness"][:1], 0.0),
         "nov": nov,
         "motion": motion * motion_scale,
+        "emission": np.where(surface, passes["Emission"][:3], 0.0),
     }
     return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in buffers.items()}

@@ -50,7 +50,7 @@ def frame_files(folder: Path, frame: int, heights: Iterable[int]) -> list[Path]:
 
 # Stored as 16-bit half when ``half`` is on: everything but depth and motion, which need float32's range and
 # sub-pixel precision (Unreal's own captures are half as well).
-HALF_BUFFERS = ("color", "base_color", "normal", "specular", "metallic", "roughness", "nov")
+HALF_BUFFERS = ("color", "base_color", "normal", "specular", "metallic", "roughness", "nov", "emission")
 
 
 def write_unreal_frame(
@@ -59,12 +59,21 @@ def write_unreal_frame(
     files: dict[str, dict[str, np.ndarray]] = {}
     halves: dict[str, list[str]] = {}
     for buffer, slot in UnrealLayout.SLOTS.items():
+        if buffer not in buffers:  # an optional buffer this frame was rendered without (emission)
+            continue
         for channel, plane in zip(slot.channels, buffers[buffer], strict=True):
             files.setdefault(slot.stem, {})[channel] = plane
             if half and buffer in HALF_BUFFERS:
                 halves.setdefault(slot.stem, []).append(channel)
     for stem, channels in files.items():
         write_exr(folder / f"{stem}.{frame:04d}.exr", channels, compression=compression, half=halves.get(stem, []))
+
+
+def _expose(buffers: dict[str, np.ndarray], exposure: float) -> None:
+    """The sequence's pre-exposure applied to its radiance buffers, in place."""
+    for name in ("color", "emission"):
+        if name in buffers:
+            buffers[name] = buffers[name] * np.float32(exposure)
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -130,6 +139,7 @@ def render_sequence(
         "lr_samples": lr_samples,
         "denoise": denoise,
         **({"denoise_prefilter": "none"} if denoise else {}),  # see stale_render
+        "passes": ["emission"],  # buffers beyond the authors' layout (see stale_render)
         "filter_width": filter_width,
         "compression": compression,
         "half": half,
@@ -214,7 +224,7 @@ def render_sequence(
         start = time.perf_counter()
         camera_to_world, previous = poses[frame], poses[frame - 1]
         hr = to_buffers(scene.render(frame, width, height), camera=camera_to_world, previous_camera=previous, lens=lens)
-        hr["color"] = hr["color"] * np.float32(meta["exposure"])
+        _expose(hr, meta["exposure"])
         write_unreal_frame(folder / f"{height}P", frame, hr, compression, half)
         for s in scales:
             size = lr_size(height, width, s)
@@ -225,7 +235,7 @@ def render_sequence(
                 lr = to_buffers(
                     passes, camera=camera_to_world, previous_camera=previous, lens=lens, motion_scale=float(s)
                 )
-                lr["color"] = lr["color"] * np.float32(meta["exposure"])
+                _expose(lr, meta["exposure"])
             write_unreal_frame(folder / f"{size[0]}P", frame, lr, compression, half)
         meta["render_seconds"][str(frame)] = round(time.perf_counter() - start, 3)
         _write_json(sidecar, meta)
@@ -366,11 +376,14 @@ def stale_render(meta: Mapping[str, Any]) -> str | None:
     """Why a sequence wdss rendered earlier (its ``sequence.json``) should be rendered again, or ``None``.
 
     Before 2026-12-04 OpenImageDenoise ran with its prefilter on frames of 200 pixels and more, which blurred
-    pixel-scale texture out of the high-resolution targets (a fine checker kept 16 % of its detail)."""
+    pixel-scale texture out of the high-resolution targets (a fine checker kept 16 % of its detail); and no
+    emission pass was written, without which emitters are demodulated as if lit."""
     settings = meta.get("settings") or {}
     prefiltered = settings.get("denoise") and min(settings.get("resolution") or [0]) >= 200
     if prefiltered and "denoise_prefilter" not in settings:
         return "its targets were denoised with OIDN's prefilter, which blurred pixel-scale texture out of them"
+    if "emission" not in (settings.get("passes") or []):
+        return "it has no emission pass (Emissive.NNNN.exr), which demodulation subtracts from the colour"
     return None
 
 
