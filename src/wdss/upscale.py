@@ -150,7 +150,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
     if not has_target:
         keys.discard("target")
     if cfg.compare:
-        keys |= {"lr", "brdf"}
+        keys |= {"lr", "brdf", "emission"}  # bilinear_demodulated beside the prediction
     frames = {seq.name: tuple(cfg.frames)} if cfg.frames is not None else None
     dataset = FrameDataset(
         [seq], sorted(keys), scale=scale, patch=None, preprocessing=prep, first_frame="zeros", frame_ranges=frames

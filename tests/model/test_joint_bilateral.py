@@ -162,12 +162,17 @@ def test_baseline_runs_through_the_module_without_parameters():
     net_config = {"_target_": "wdss.model.joint_bilateral.JointBilateralUpsample", "sigma_depth": 0.05}
     module = SuperResolutionModule(net_config, flip=False, trainable=False)
     assert not module.trainable and module.configure_optimizers() is None and module.temporal == "none"
-    assert set(module.inputs) == {"lr", "gbuffer", "brdf", "target"}
+    # It upsamples demodulated irradiance: the emission the data takes out of the LR comes back at HR.
+    assert set(module.inputs) == {"lr", "gbuffer", "brdf", "target", "emission"}
     data = batch(size=(15, 21), scale=3.0)
     out = module(data)
     expected = joint_bilateral_upsample(data["lr"], data["gbuffer"], sigma_depth=0.05) * data["brdf"]
     torch.testing.assert_close(out["color"], expected)
     assert out["coefficients"] is None and isinstance(module.net, JointBilateralUpsample)
+    data["emission"] = torch.rand_like(data["brdf"])
+    torch.testing.assert_close(module(data)["color"], expected + data["emission"])
+    colour_space = SuperResolutionModule({**net_config, "demodulated": False}, flip=False, trainable=False)
+    assert "emission" not in colour_space.inputs  # its LR colour holds the emission already
 
 
 def test_the_colour_space_variant_filters_the_lr_colour():

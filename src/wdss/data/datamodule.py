@@ -7,8 +7,8 @@ key                shape                        meaning
 =================  ===========================  ================================================================
 ``target``         (N, 3, H, W)                 high-resolution linear HDR colour (ground truth)
 ``brdf``           (N, 3, H, W)                 high-resolution BRDF factor F, 1 where F vanishes
-``lr``             (N, 3, h, w)                 low-resolution input: irradiance colour / F_lr (or colour when
-                                                ``preprocessing.demodulate`` is false)
+``lr``             (N, 3, h, w)                 low-resolution input: irradiance (colour - emission) / F_lr (or
+                                                colour when ``preprocessing.demodulate`` is false)
 ``lr_color``       (N, 3, h, w)                 low-resolution colour (for image-space baselines)
 ``lr_brdf``        (N, 3, h, w)                 low-resolution BRDF factor
 ``gbuffer``        (N, 11, H, W)                base colour 3, depth 1, normal 3, specular, roughness, NoV,
@@ -21,6 +21,9 @@ key                shape                        meaning
 ``prev_lr_color``  (N, 3, h, w)                 the previous frame's low-resolution colour (NSRR)
 ``prev_lr_gbuffer`` (N, 4, h, w)                the previous frame's low-resolution depth and normal (NSRR)
 ``history2``       (N, 3, H, W)                 frame t-2 (irradiance) warped to t through t-1 (FuseSR)
+``emission``       (N, 3, H, W)                 high-resolution emitted radiance, added to the remodulated
+                                                prediction (only where ``preprocessing.emission`` separates it;
+                                                0 for a sequence without the buffer)
 ``scale``          (N,)                         the nominal scale s of the batch (h = round(H / s))
 ``sequence``       list[str], ``frame`` (N,)    where each sample comes from
 =================  ===========================  ================================================================

@@ -122,8 +122,9 @@ class SuperResolutionModule(L.LightningModule):
     @property
     def inputs(self) -> tuple[str, ...]:
         """Batch keys to ask the data for: the network's, the BRDF, the target and (for masked L1) the mask."""
-        # The emission comes back at high resolution wherever the data separates it (data.preprocessing.emission).
-        keys = set(self.net.inputs) | {"brdf", "target", "emission"}
+        keys = set(self.net.inputs) | {"brdf", "target"}
+        if "lr" in keys:  # a prediction of demodulated irradiance: the emission the data separated comes back at HR
+            keys.add("emission")
         if self.criterion.weights.get("masked_l1"):
             keys.add("spatial_mask")
         if self.temporal == "recurrent":  # the history is the model's own previous output, warped
