@@ -129,7 +129,7 @@ def test_a_killed_render_resumes_without_redoing_frames(tmp_path):
     done = {
         p: p.stat().st_mtime_ns for p in (tmp_path / "seq").rglob("*.exr") if ".0000." in p.name or ".0001." in p.name
     }
-    assert len(done) == 16  # frames 0 and 1: 4 files at 2 resolutions
+    assert len(done) == 20  # frames 0 and 1: 5 files (the emission too) at 2 resolutions
     render_sequence(
         tmp_path, "seq", 3, frames=5, resolution=(32, 16), scales=(2,), samples=1, denoise=False, objects=(10, 10)
     )
