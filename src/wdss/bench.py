@@ -16,6 +16,8 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
+from wdss.data.preprocess import prediction_color
+
 BASES = ("haar", "db4", "sym4")
 TABLE_WIDTH = 160  # columns of a table printed off a terminal
 
@@ -513,8 +515,6 @@ class PlainReference(torch.nn.Module):
     def forward(self, batch: dict) -> dict:
         base, x = self.inputs(batch)
         irradiance = torch.expm1((base + self.body(x)).clamp(0.0, 20.0))
-        from wdss.data.preprocess import prediction_color
-
         return {"irradiance": irradiance, "color": prediction_color(irradiance, batch), "coefficients": None}
 
 

@@ -34,7 +34,7 @@ __all__ = [
     "build_batch",
     "clean",
     "depth_range",
-    "lit",
+    "irradiance_of",
     "prediction_color",
     "target_irradiance",
 ]
@@ -177,12 +177,16 @@ def brdf_of(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
     return safe_brdf(raw)
 
 
-def lit(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
-    """The colour less its emitted part (where emission is separated): what is F times an irradiance. Clamped at 0:
-    a denoised colour may fall a little below its exact emission."""
-    if not prep.separates_emission:
+def irradiance_of(buffers: dict[str, Tensor], prep: Preprocessing, brdf: Tensor | None = None) -> Tensor:
+    """What a frame's colour becomes as an input: its colour less its emitted part (where emission is separated;
+    clamped at 0, as a denoised colour may fall a little below its exact emission) over its BRDF factor (``brdf``,
+    or the buffers' own), or the colour itself when ``prep.demodulate`` is off."""
+    if not prep.demodulate:
         return buffers["color"]
-    return (buffers["color"] - buffers["emission"]).clamp_min(0.0)
+    color = buffers["color"]
+    if prep.separates_emission:
+        color = (color - buffers["emission"]).clamp_min(0.0)
+    return demodulate(color, brdf_of(buffers, prep) if brdf is None else brdf)
 
 
 def prediction_color(irradiance: Tensor | None, batch: Mapping[str, Tensor]) -> Tensor | None:
@@ -223,7 +227,7 @@ def build_batch(
     if "lr" in keys or "lr_brdf" in keys:
         lr_brdf = brdf_of(lr, prep) if (prep.demodulate or "lr_brdf" in keys) else None
         if "lr" in keys:
-            batch["lr"] = demodulate(lit(lr, prep), lr_brdf) if prep.demodulate else lr["color"]
+            batch["lr"] = irradiance_of(lr, prep, lr_brdf)
         if "lr_brdf" in keys:
             batch["lr_brdf"] = lr_brdf
     if "lr_color" in keys:
@@ -238,7 +242,7 @@ def build_batch(
     if "history" in keys or "temporal_mask" in keys:
         motion = hr["motion"]
         if "history" in keys:
-            previous = demodulate(lit(prev, prep), brdf_of(prev, prep)) if prep.demodulate else prev["color"]
+            previous = irradiance_of(prev, prep)
             batch["history"] = warp_backward(previous, motion, origin=(m1, m1))
         if "temporal_mask" in keys:
             names = ("depth", "base_color", "normal")
@@ -255,7 +259,7 @@ def build_batch(
         batch["prev_lr_gbuffer"] = torch.cat([prev_lr["depth"], prev_lr["normal"]], dim=1)
     if "history2" in keys:  # frame t-2 warped to t-1 (on t-1's window), then to t
         prev2 = roles["prev2"]
-        older = demodulate(lit(prev2, prep), brdf_of(prev2, prep)) if prep.demodulate else prev2["color"]
+        older = irradiance_of(prev2, prep)
         onto_prev = warp_backward(older, prev["motion"], origin=(m2 - m1, m2 - m1))
         batch["history2"] = warp_backward(onto_prev, hr["motion"], origin=(m1, m1))
     return batch
