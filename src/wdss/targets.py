@@ -38,6 +38,7 @@ ALLOWED: Mapping[str, tuple[str, ...]] = {
     "wdss.render": ("render_preset",),
     "wdss.tracking": ("SweepParentRun",),
     "wdss.train": ("ValidateBeforeRun",),
+    "wdss.averaging": ("EMAWeightAveraging",),
     # optimisers and learning-rate schedulers (not LambdaLR/MultiplicativeLR: they take a function)
     "torch.optim": ("SGD", "Adam", "AdamW", "Adamax", "Adagrad", "Adadelta", "RMSprop", "NAdam", "RAdam"),
     "torch.optim.lr_scheduler": (
@@ -54,7 +55,7 @@ ALLOWED: Mapping[str, tuple[str, ...]] = {
     ),
     # the Lightning trainer, callbacks and logger the config groups use
     "lightning.pytorch": ("Trainer",),
-    "lightning.pytorch.callbacks": ("ModelCheckpoint", "LearningRateMonitor", "EMAWeightAveraging"),
+    "lightning.pytorch.callbacks": ("ModelCheckpoint", "LearningRateMonitor"),
     "lightning.pytorch.loggers": ("MLFlowLogger",),
 }
 # The listed modules and their parent packages: the only modules resolving a path may import.
