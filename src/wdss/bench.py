@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m wdss.bench wavelets|data|model|inference|stability|render|learn``.
+"""Benchmarks: ``python -m wdss.bench wavelets|data|model|inference|stability|render|learn|bandlimit``.
 
 Every benchmark reports medians of repeated runs and ratios measured in the same process, never absolute
 targets: timing on shared machines is noisy, so comparisons are only made within one run.
@@ -604,6 +604,55 @@ def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epo
     return table
 
 
+# --------------------------------------------------------------------------------------------------------
+# bandlimit: what an output without detail above the LR grid's Nyquist frequency can score at best
+# --------------------------------------------------------------------------------------------------------
+
+
+def band_limited(image: torch.Tensor, scale: float) -> torch.Tensor:
+    """The orthogonal projection of ``image`` (..., H, W) onto the images an ``H/scale x W/scale`` grid can hold:
+    its orthonormal 2-D DCT-II with every coefficient at index >= ``int(H / scale)`` (rows) or ``int(W / scale)``
+    (columns) set to zero. Of all such images it is the nearest in squared error (Parseval), so its PSNR against
+    ``image`` bounds any upsampler whose output has no content above the LR grid's frequencies; the DCT's even
+    extension keeps the frame's borders from leaking in as a periodic FFT's wrap-around would."""
+    from scipy.fft import dctn, idctn
+
+    array = image.detach().double().cpu().numpy()
+    coefficients = dctn(array, axes=(-2, -1), norm="ortho")
+    height, width = array.shape[-2:]
+    coefficients[..., int(height / scale) :, :] = 0.0
+    coefficients[..., :, int(width / scale) :] = 0.0
+    return torch.from_numpy(idctn(coefficients, axes=(-2, -1), norm="ortho")).to(image.dtype)
+
+
+def bench_bandlimit(
+    root: str, names: Sequence[str] | None, scales: Sequence[float], tonemap_name: str = "hable", exposure=None
+) -> Table:
+    """Per sequence and scale, the mean over frames (the first skipped, as the data module does) of the PSNR of the
+    tone-mapped HR target against its :func:`band_limited` projection, in the metric's display space: the most a
+    method can score from LR colour alone without predicting detail the LR grid cannot hold."""
+    from wdss.data.layouts import discover_sequences
+    from wdss.data.tonemap import ToneMap
+    from wdss.model.metrics import psnr
+
+    tone = ToneMap(tonemap_name, exposure)
+    table = Table(title=f"bandlimit: PSNR (dB) of the target against its projection on the LR grid, {tonemap_name}")
+    table.add_column("sequence")
+    table.add_column("frames", justify="right")
+    for scale in scales:
+        table.add_column(f"{scale:g}x", justify="right")
+    for sequence in discover_sequences(root, names):
+        frames = sequence.frames[1:]
+        totals = [0.0 for _ in scales]
+        for frame in frames:
+            target = torch.from_numpy(sequence.read(frame, sequence.hr, ["color"])["color"])[None]
+            shown = tone(target, target)
+            for i, scale in enumerate(scales):
+                totals[i] += float(psnr(band_limited(shown, scale).clamp(0, 1), shown)[0])
+        table.add_row(sequence.name, str(len(frames)), *(f"{t / len(frames):.2f}" for t in totals))
+    return table
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m wdss.bench", description=__doc__)
     sub = parser.add_subparsers(dest="what", required=True)
@@ -649,6 +698,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     learn.add_argument("--every", type=int, default=50)
     learn.add_argument("--held", type=int, default=6, help="batches held out (never trained on)")
     learn.add_argument("--epochs", type=int, default=4, help="epochs of batches drawn (held + training pool)")
+    band = sub.add_parser("bandlimit", help="the best PSNR of an output without detail above the LR grid's Nyquist")
+    band.add_argument("root", help="a dataset folder (its sequences), e.g. data/mini")
+    band.add_argument("--sequences", nargs="+", default=None, help="default: every sequence under root")
+    band.add_argument("--scales", type=float, nargs="+", default=[2.0, 3.0, 4.0])
+    band.add_argument("--tonemap", default="hable")
+    band.add_argument("--exposure", default=None, help="the metric's tone-map exposure: a number or auto")
     args = parser.parse_args(argv)
 
     # Off a terminal (a pipe, a log file) rich would wrap every cell at 80 columns: print tables whole.
@@ -669,6 +724,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         console.print(bench_model(tuple(args.size), args.scale, args.repeats, args.device, args.widths))
     elif args.what == "learn":
         console.print(bench_learn(args.overrides, args.steps, args.every, args.held, args.epochs))
+    elif args.what == "bandlimit":
+        exposure = None if args.exposure is None else args.exposure if args.exposure == "auto" else float(args.exposure)
+        console.print(bench_bandlimit(args.root, args.sequences, args.scales, args.tonemap, exposure))
     elif args.what == "inference":
         if args.threads:
             torch.set_num_threads(args.threads)
