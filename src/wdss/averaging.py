@@ -5,7 +5,8 @@ checkpoint as ``current_model_state`` so that a resumed fit goes on from them. W
 runs after a fit in the same process, the callback still holds its averaged model and loads that raw state into
 the module: the test would then measure weights that neither validation nor the checkpoint's ``state_dict``
 describe. Outside fitting, this subclass leaves the module with the checkpoint's (averaged) ``state_dict``, as
-``wdss.eval`` reads it.
+``wdss.eval`` reads it, and once a fit ends it drops its averaged model, whose validation hooks would otherwise swap
+it in for whatever a later ``trainer.validate`` loads.
 """
 
 from __future__ import annotations
@@ -27,3 +28,8 @@ class EMAWeightAveraging(_LightningEMA):
     ) -> None:
         if trainer.state.fn == TrainerFn.FITTING:
             super().on_load_checkpoint(trainer, pl_module, checkpoint)
+
+    def teardown(self, trainer: pl.Trainer, pl_module: pl.LightningModule, stage: str) -> None:
+        # on_train_end has copied the average into the module: what the fit leaves is what it checkpointed
+        if stage == "fit":
+            self._average_model = None

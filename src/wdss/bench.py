@@ -610,27 +610,35 @@ def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epo
 
 
 def band_limited(image: torch.Tensor, scale: float) -> torch.Tensor:
-    """The orthogonal projection of ``image`` (..., H, W) onto the images an ``H/scale x W/scale`` grid can hold:
-    its orthonormal 2-D DCT-II with every coefficient at index >= ``int(H / scale)`` (rows) or ``int(W / scale)``
-    (columns) set to zero. Of all such images it is the nearest in squared error (Parseval), so its PSNR against
-    ``image`` bounds any upsampler whose output has no content above the LR grid's frequencies; the DCT's even
-    extension keeps the frame's borders from leaking in as a periodic FFT's wrap-around would."""
+    """The orthogonal projection of ``image`` (..., H, W) onto the images the LR grid of ``scale`` can hold
+    (:func:`wdss.data.sampling.lr_size`, ``h x w``): its orthonormal 2-D DCT-II with every coefficient at row index
+    >= ``h`` or column index >= ``w`` set to zero. Of all such images it is the nearest in squared error (Parseval),
+    so its PSNR against ``image`` bounds any upsampler whose output has no content above the LR grid's frequencies;
+    the DCT's even extension keeps the frame's borders from leaking in as a periodic FFT's wrap-around would."""
     from scipy.fft import dctn, idctn
+
+    from wdss.data.sampling import lr_size
 
     array = image.detach().double().cpu().numpy()
     coefficients = dctn(array, axes=(-2, -1), norm="ortho")
-    height, width = array.shape[-2:]
-    coefficients[..., int(height / scale) :, :] = 0.0
-    coefficients[..., :, int(width / scale) :] = 0.0
-    return torch.from_numpy(idctn(coefficients, axes=(-2, -1), norm="ortho")).to(image.dtype)
+    height, width = lr_size(*array.shape[-2:], scale)
+    coefficients[..., height:, :] = 0.0
+    coefficients[..., :, width:] = 0.0
+    return torch.from_numpy(idctn(coefficients, axes=(-2, -1), norm="ortho")).to(image)
 
 
 def bench_bandlimit(
-    root: str, names: Sequence[str] | None, scales: Sequence[float], tonemap_name: str = "hable", exposure=None
+    root: str,
+    names: Sequence[str] | None,
+    scales: Sequence[float],
+    tonemap_name: str = "hable",
+    exposure=None,
+    skip_first: bool = False,
 ) -> Table:
-    """Per sequence and scale, the mean over frames (the first skipped, as the data module does) of the PSNR of the
-    tone-mapped HR target against its :func:`band_limited` projection, in the metric's display space: the most a
-    method can score from LR colour alone without predicting detail the LR grid cannot hold."""
+    """Per sequence and scale, the mean over frames of the PSNR of the tone-mapped HR target against its
+    :func:`band_limited` projection, in the metric's display space: the most a method can score from LR colour alone
+    without predicting detail the LR grid cannot hold. Every frame by default, as the data module tests a model that
+    reads no previous frame; ``skip_first``: without the first, as it tests one that does."""
     from wdss.data.layouts import discover_sequences
     from wdss.data.tonemap import ToneMap
     from wdss.model.metrics import psnr
@@ -642,7 +650,7 @@ def bench_bandlimit(
     for scale in scales:
         table.add_column(f"{scale:g}x", justify="right")
     for sequence in discover_sequences(root, names):
-        frames = sequence.frames[1:]
+        frames = sorted(sequence.frames)[1:] if skip_first else sorted(sequence.frames)
         totals = [0.0 for _ in scales]
         for frame in frames:
             target = torch.from_numpy(sequence.read(frame, sequence.hr, ["color"])["color"])[None]
@@ -704,6 +712,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     band.add_argument("--scales", type=float, nargs="+", default=[2.0, 3.0, 4.0])
     band.add_argument("--tonemap", default="hable")
     band.add_argument("--exposure", default=None, help="the metric's tone-map exposure: a number or auto")
+    band.add_argument("--skip-first", action="store_true", help="leave out each sequence's first frame")
     args = parser.parse_args(argv)
 
     # Off a terminal (a pipe, a log file) rich would wrap every cell at 80 columns: print tables whole.
@@ -726,7 +735,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         console.print(bench_learn(args.overrides, args.steps, args.every, args.held, args.epochs))
     elif args.what == "bandlimit":
         exposure = None if args.exposure is None else args.exposure if args.exposure == "auto" else float(args.exposure)
-        console.print(bench_bandlimit(args.root, args.sequences, args.scales, args.tonemap, exposure))
+        console.print(bench_bandlimit(args.root, args.sequences, args.scales, args.tonemap, exposure, args.skip_first))
     elif args.what == "inference":
         if args.threads:
             torch.set_num_threads(args.threads)
