@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 
 import pytest
+import torch
 from rich.table import Table
 
 from wdss import bench
@@ -43,10 +44,12 @@ def test_runners_are_timed_in_interleaved_rounds_each_starting_one_later():
 
 @pytest.mark.slow  # torch.compile and the ONNX export of every configuration: ~1 min
 def test_inference_table_times_every_backend_with_ratios(capsys):
-    bench.main(["inference", "--size", "16", "32", "--repeats", "2", "--configs", "none", "SWT-db4", "--threads", "1"])
+    argv = ["inference", "--size", "16", "32", "--repeats", "2", "--configs", "none", "SWT-db4", "--threads", "1"]
+    bench.main([*argv, "--profile"])
     out = capsys.readouterr().out
     assert "ms per 32x16 frame at 2x, CPU, 1 threads, 2 rounds" in out
-    rows = table_rows(out)
+    timed, profiled = out.split("where the time goes")
+    rows = table_rows(timed)
     assert {backend for _, backend in rows} - {"backend"} == {"eager", "compile", "onnxruntime"}
     for name in ("none", "SWT-db4"):
         for backend in bench.BACKENDS:
@@ -55,6 +58,28 @@ def test_inference_table_times_every_backend_with_ratios(capsys):
             assert float(to_eager) == 1.0 if backend == "eager" else float(to_eager) > 0
             assert float(error) <= 1e-4  # every backend computes the eager colour
         assert float(rows["none", backend][2]) == 1.0
+    # Where the time goes: every pair's profile, its kinds of work adding up to its total, the differences to none's.
+    where = table_rows(profiled)
+    for backend in bench.BACKENDS:
+        none = [float(cell) for cell in where["none", backend]]
+        swt = [re.fullmatch(r"(\S+) \((\S+)\)", cell).groups() for cell in where["SWT-db4", backend]]
+        for values in (none, [float(ms) for ms, _ in swt]):
+            assert values[0] == pytest.approx(sum(values[1:]), abs=0.2) and values[1] > 0  # convolutions ran
+        differences = [float(ms) - reference for (ms, _), reference in zip(swt, none, strict=True)]
+        assert [float(diff) for _, diff in swt] == pytest.approx(differences, abs=0.2)
+    assert float(where["none", "compile"][3]) > 0  # the kernels torch.compile generated
+    assert float(where["none", "eager"][3]) == float(where["none", "onnxruntime"][3]) == 0
+
+
+def test_profile_buckets_sort_work_by_what_ran():
+    """Eager and compile: torch's operators by self time (a convolution's dispatch layers are not counted twice)."""
+    import torch.nn.functional as F
+
+    x, w = torch.rand(1, 8, 32, 32), torch.rand(8, 8, 3, 3)
+    spent = bench.profile_buckets(lambda: F.pixel_shuffle(F.conv2d(x, w, padding=1), 2).sin(), "eager", calls=2)
+    assert set(spent) == set(bench.PROFILE_BUCKETS)
+    assert spent["convolution"] > 0 and spent["data movement"] > 0 and spent["other"] > 0  # conv, shuffle, sin
+    assert spent["generated"] == 0
 
 
 @pytest.mark.parametrize("residual", ["bilinear", "joint_bilateral", "learned_bilateral recipe.tap_brdf=true"])

@@ -11,6 +11,7 @@ import statistics
 import sys
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import torch
 from rich.console import Console
@@ -344,13 +345,26 @@ INFERENCE_CONFIGS = {
 BACKENDS = ("eager", "compile", "onnxruntime")
 
 
+def ort_session(path: str, profile: bool = False):
+    """An onnxruntime CPU session on torch's thread count (the same cores for every backend)."""
+    import onnxruntime
+
+    options = onnxruntime.SessionOptions()
+    options.intra_op_num_threads = torch.get_num_threads()
+    # Idle workers sleep instead of spinning, which would steal a core from the backend timed next.
+    options.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    if profile:
+        options.enable_profiling = True
+        options.profile_file_prefix = str(Path(path).with_suffix("")) + "_profile"
+    return onnxruntime.InferenceSession(path, options, providers=["CPUExecutionProvider"])
+
+
 def _inference_runners(
     net: torch.nn.Module, height: int, width: int, scale: float, backends: Sequence[str], tmp: str
-) -> tuple[dict[str, Callable[[], object]], dict[str, float]]:
-    """A zero-argument callable per backend, all on the same example inputs and weights, and each one's
-    max |difference| / max against eager's colour."""
+) -> tuple[dict[str, Callable[[], object]], dict[str, float], dict]:
+    """A zero-argument callable per backend, all on the same example inputs and weights, each one's
+    max |difference| / max against eager's colour, and the inputs as onnxruntime's feed (the graph is in ``tmp``)."""
     import numpy as np
-    import onnxruntime
 
     from wdss.export import export_onnx, relative_error
     from wdss.model.module import SuperResolutionModule
@@ -360,21 +374,78 @@ def _inference_runners(
         SuperResolutionModule(net), f"{tmp}/model.onnx", height=height, width=width, scale=scale
     )
     runners: dict[str, Callable[[], object]] = {}
+    feed = {k: v.numpy() for k, v in inputs.items()}
     for backend in backends:
         if backend == "onnxruntime":
-            options = onnxruntime.SessionOptions()
-            options.intra_op_num_threads = torch.get_num_threads()  # torch's threads: the same cores for all
-            # Idle workers sleep instead of spinning, which would steal a core from the backend timed next.
-            options.add_session_config_entry("session.intra_op.allow_spinning", "0")
-            session = onnxruntime.InferenceSession(f"{tmp}/model.onnx", options, providers=["CPUExecutionProvider"])
-            feed = {k: v.numpy() for k, v in inputs.items()}
+            session = ort_session(f"{tmp}/model.onnx")
             runners[backend] = lambda s=session, f=feed: torch.from_numpy(s.run(["color"], f)[0])
         else:
             module = torch.compile(graph) if backend == "compile" else graph
             runners[backend] = lambda m=module: m(inputs)[0]
+    if not reference.any():  # a network dead at initialisation: every backend would match it trivially
+        raise RuntimeError(f"{net.__class__.__name__}'s colour is zero everywhere: the error column would say nothing")
     with torch.inference_mode():  # the first call also compiles
         errors = {backend: relative_error(np.asarray(run()), reference.numpy()) for backend, run in runners.items()}
-    return runners, errors
+    return runners, errors, feed
+
+
+# Where the time of a forward goes, by the name of what ran: torch's operators (eager; the convolutions compiled code
+# calls out to), onnxruntime's node types, and the kernels torch.compile generates (elementwise and copies, fused).
+CONVOLUTION = frozenset({"aten::mkldnn_convolution", "aten::convolution_overrideable", "aten::slow_conv2d_forward",
+                         "aten::_slow_conv2d_forward", "aten::thnn_conv2d", "Conv", "FusedConv", "ConvTranspose",
+                         "aten::mkldnn_convolution_transpose", "aten::slow_conv_transpose2d"})  # fmt: skip
+DATA_MOVEMENT = frozenset({
+    "aten::copy_", "aten::clone", "aten::contiguous", "aten::pixel_shuffle", "aten::pixel_unshuffle", "aten::cat",
+    "aten::index_select", "aten::constant_pad_nd", "aten::replication_pad2d", "aten::_pad_circular", "aten::stack",
+    "aten::flip", "DepthToSpace", "SpaceToDepth", "Transpose", "Concat", "Slice", "Gather", "Pad", "Split",
+    "ReorderInput", "ReorderOutput", "Tile", "Expand",
+})  # fmt: skip
+PROFILE_BUCKETS = ("convolution", "data movement", "generated", "other")
+
+
+def profile_buckets(run: Callable[[], object], backend: str, session=None, calls: int = 3) -> dict[str, float]:
+    """Milliseconds per call of ``run`` by kind of work (:data:`PROFILE_BUCKETS`), from the backend's profiler: torch's
+    for eager and compile (self times, so nothing is counted twice), onnxruntime's per-node times for ``session``.
+    "generated" is what torch.compile's own kernels took (elementwise work and copies fused together)."""
+    buckets = dict.fromkeys(PROFILE_BUCKETS, 0.0)
+
+    def add(name: str, us: float) -> None:
+        if name in CONVOLUTION:
+            buckets["convolution"] += us
+        elif name in DATA_MOVEMENT:
+            buckets["data movement"] += us
+        elif name.startswith(("## Call CompiledFxGraph", "graph_")):
+            buckets["generated"] += us
+        else:
+            buckets["other"] += us
+
+    if backend == "onnxruntime":
+        import json
+        from collections import defaultdict
+
+        # A session profiles from its creation on: ``session`` is a fresh one made with enable_profiling, and its
+        # first run (allocations, the arena's growth) is left out as the warm-up of the other backends is.
+        for _ in range(calls + 1):
+            run()
+        with open(session.end_profiling()) as f:
+            events = json.load(f)
+        per_node: dict = defaultdict(list)
+        for event in events:
+            if event.get("cat") == "Node" and event["name"].endswith("_kernel_time"):
+                per_node[event["name"], event["args"]["op_name"]].append(event["dur"])
+        for (_, op), durations in per_node.items():
+            add(op, statistics.mean(durations[1:] or durations))
+        calls = 1
+    else:
+        run()  # warm-up (a first compiled call compiles)
+        from torch.profiler import ProfilerActivity, profile
+
+        with profile(activities=[ProfilerActivity.CPU]) as prof:
+            for _ in range(calls):
+                run()
+        for event in prof.key_averages():
+            add(event.key, event.self_cpu_time_total)
+    return {name: us / calls / 1e3 for name, us in buckets.items()}
 
 
 def bench_inference(
@@ -384,13 +455,15 @@ def bench_inference(
     configs: Sequence[str] = tuple(INFERENCE_CONFIGS),
     backends: Sequence[str] = BACKENDS,
     warmup: int = 1,
-) -> Table:
+    profile: bool = False,
+) -> Table | tuple[Table, Table]:
     """Milliseconds per output frame of every configuration on every backend (CPU, paper widths), as an engine
     runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode.
 
     All (configuration, backend) pairs are built first, then timed in the same interleaved rounds
     (:func:`interleaved_ms`); ratios are medians of the per-round ratios (paired), times medians of the rounds.
-    ONNX Runtime gets torch's thread count.
+    ONNX Runtime gets torch's thread count. With ``profile``, a second table says where each pair's time goes
+    (:func:`profile_buckets`, after the timing, so that no profiler slows a timed run), beside none's.
     """
     import tempfile
 
@@ -400,11 +473,20 @@ def bench_inference(
     with tempfile.TemporaryDirectory() as tmp:
         built = {}
         for name in configs:
+            torch.manual_seed(0)  # the same weights on every run: a rerun times the same networks
             net = WDSSNet(**INFERENCE_CONFIGS[name]).eval()
             built[name] = _inference_runners(net, height, width, scale, backends, f"{tmp}/{name}")
-    runners = {(name, backend): built[name][0][backend] for name in configs for backend in backends}
-    with torch.inference_mode():
-        times = interleaved_ms(runners, repeats, warmup)
+        runners = {(name, backend): built[name][0][backend] for name in configs for backend in backends}
+        with torch.inference_mode():
+            times = interleaved_ms(runners, repeats, warmup)
+            spent = {}
+            if profile:
+                for name, backend in runners:
+                    run, session = runners[name, backend], None
+                    if backend == "onnxruntime":  # a fresh session that profiles, on the same graph and feed
+                        session = ort_session(f"{tmp}/{name}/model.onnx", profile=True)
+                        run = lambda s=session, f=built[name][2]: s.run(["color"], f)  # noqa: E731
+                    spent[name, backend] = profile_buckets(run, backend, session)
 
     threads = torch.get_num_threads()
     table = Table(title=f"ms per {width}x{height} frame at {scale:g}x, CPU, {threads} threads, {repeats} rounds")
@@ -417,7 +499,22 @@ def bench_inference(
             name, backend, f"{statistics.median(times[name, backend]):.1f}", eager, none,
             f"{built[name][1][backend]:.1e}",
         )  # fmt: skip
-    return table
+    if not profile:
+        return table
+    where = Table(title="where the time goes: profiled ms per frame by kind of work (difference to none)")
+    for column in ("model", "backend", "profiled", *PROFILE_BUCKETS):
+        where.add_column(column, justify="left" if column in ("model", "backend") else "right")
+    for (name, backend), buckets in spent.items():
+        base = spent.get(("none", backend)) if name != "none" else None
+
+        def cell(ms: float, reference: float | None) -> str:
+            return f"{ms:.1f}" if reference is None else f"{ms:.1f} ({ms - reference:+.1f})"
+
+        total = sum(buckets.values())
+        cells = [cell(total, None if base is None else sum(base.values()))]
+        cells += [cell(buckets[k], None if base is None else base[k]) for k in PROFILE_BUCKETS]
+        where.add_row(name, backend, *cells)
+    return table, where
 
 
 def bench_stability() -> Table:
@@ -693,6 +790,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     inf.add_argument("--configs", nargs="+", choices=list(INFERENCE_CONFIGS), default=list(INFERENCE_CONFIGS))
     inf.add_argument("--backends", nargs="+", choices=list(BACKENDS), default=list(BACKENDS))
     inf.add_argument("--threads", type=int, default=None, help="CPU threads of every backend (default: torch's)")
+    inf.add_argument("--profile", action="store_true", help="also where the time goes, by kind of work (profilers)")
     sub.add_parser("stability", help="stiff and extreme cases: worst relative error, finiteness")
     ren = sub.add_parser("render", help="rendered colour at a few sample counts against a high-sample reference")
     ren.add_argument("--seeds", type=int, nargs="+", default=[101, 200])  # training and validation scenes of mini
@@ -739,7 +837,11 @@ def main(argv: Sequence[str] | None = None) -> None:
     elif args.what == "inference":
         if args.threads:
             torch.set_num_threads(args.threads)
-        console.print(bench_inference(tuple(args.size), args.scale, args.repeats, args.configs, args.backends))
+        tables = bench_inference(
+            tuple(args.size), args.scale, args.repeats, args.configs, args.backends, profile=args.profile
+        )
+        for table in tables if isinstance(tables, tuple) else (tables,):
+            console.print(table)
 
 
 if __name__ == "__main__":
