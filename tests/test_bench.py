@@ -42,6 +42,17 @@ def test_runners_are_timed_in_interleaved_rounds_each_starting_one_later():
     assert bench.paired_ratio([2.0, 9.0, 4.0], [1.0, 3.0, 4.0]) == 2.0  # per round: 2, 3, 1
 
 
+def test_the_median_interval_is_the_order_statistics_that_cover_it():
+    # n = 10: P(B <= 1) = 11 / 1024, so (2nd, 9th) covers 1 - 22 / 1024 = 97.9 %; (3rd, 8th) only 89.1 %.
+    assert bench.median_interval(list(range(10, 0, -1))) == (2, 9)
+    assert bench.median_interval(list(range(1, 11)), confidence=0.85) == (3, 8)
+    # n = 6: only the extremes, 1 - 2 / 64 = 96.9 %; n = 5 cannot reach 95 % (1 - 2 / 32 = 93.8 %).
+    assert bench.median_interval([3, 1, 2, 6, 5, 4]) == (1, 6)
+    assert bench.median_interval([1, 2, 3, 4, 5]) is None
+    assert bench.ratio_cell([2.0] * 5, [1.0] * 5) == "2.000"
+    assert bench.ratio_cell([float(t) for t in range(1, 11)], [1.0] * 10) == "5.500 [2.000, 9.000]"
+
+
 @pytest.mark.slow  # torch.compile and the ONNX export of every configuration: ~1 min
 def test_inference_table_times_every_backend_with_ratios(capsys):
     argv = ["inference", "--size", "16", "32", "--repeats", "2", "--configs", "none", "SWT-db4", "--threads", "1"]
@@ -54,10 +65,11 @@ def test_inference_table_times_every_backend_with_ratios(capsys):
     for name in ("none", "SWT-db4"):
         for backend in bench.BACKENDS:
             ms, to_eager, to_none, error = rows[name, backend]
-            assert float(ms) > 0 and float(to_none) > 0
-            assert float(to_eager) == 1.0 if backend == "eager" else float(to_eager) > 0
+            to_eager, to_none = float(to_eager.split()[0]), float(to_none.split()[0])  # the ratio before its interval
+            assert float(ms) > 0 and to_none > 0
+            assert to_eager == 1.0 if backend == "eager" else to_eager > 0
             assert float(error) <= 1e-4  # every backend computes the eager colour
-        assert float(rows["none", backend][2]) == 1.0
+        assert rows["none", backend][2] == "1.000"  # a ratio of 1 in every round: no interval
     # Where the time goes: every pair's profile, its kinds of work adding up to its total, the differences to none's.
     where = table_rows(profiled)
     for backend in bench.BACKENDS:

@@ -7,6 +7,7 @@ targets: timing on shared machines is noisy, so comparisons are only made within
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import sys
 import time
@@ -52,6 +53,29 @@ def interleaved_ms(runners: dict, repeats: int, warmup: int = 1) -> dict:
             _synchronize()
             times[key].append((time.perf_counter() - start) * 1e3)
     return times
+
+
+def median_interval(values: Sequence[float], confidence: float = 0.95) -> tuple[float, float] | None:
+    """A distribution-free interval of the median: the order statistics ``(j, n + 1 - j)`` (1-based) for the largest
+    ``j`` whose coverage ``1 - 2 P(Binomial(n, 1/2) < j)`` is at least ``confidence``; None when even the extremes
+    cover less (fewer than 6 values at 95 %)."""
+    n = len(values)
+    ordered = sorted(values)
+    below, j = 0.0, 0  # below = P(B < j + 1) as j grows
+    while j < n // 2:
+        below += math.comb(n, j) / 2**n
+        if 2 * below > 1 - confidence:
+            break
+        j += 1
+    return (ordered[j - 1], ordered[n - j]) if j else None
+
+
+def ratio_cell(times: Sequence[float], reference: Sequence[float]) -> str:
+    """The paired ratio and, when the rounds allow one, its 95 % interval (of the per-round ratios' median)."""
+    ratios = [t / r for t, r in zip(times, reference, strict=True)]
+    interval = median_interval(ratios)
+    tail = f" [{interval[0]:.3f}, {interval[1]:.3f}]" if interval and interval[0] != interval[1] else ""
+    return f"{statistics.median(ratios):.3f}{tail}"
 
 
 def paired_ratio(times: Sequence[float], reference: Sequence[float]) -> float:
@@ -462,7 +486,8 @@ def bench_inference(
 
     All (configuration, backend) pairs are built first, then timed in the same interleaved rounds
     (:func:`interleaved_ms`); ratios are medians of the per-round ratios (paired), times medians of the rounds.
-    ONNX Runtime gets torch's thread count. With ``profile``, a second table says where each pair's time goes
+    ONNX Runtime gets torch's thread count; a ratio's brackets are the 95 % interval of its median over the rounds
+    (:func:`median_interval`). With ``profile``, a second table says where each pair's time goes
     (:func:`profile_buckets`, after the timing, so that no profiler slows a timed run), beside none's.
     """
     import tempfile
@@ -493,8 +518,8 @@ def bench_inference(
     for column in ("model", "backend", "ms / frame", "time / eager", "time / none", "max rel. error"):
         table.add_column(column, justify="left" if column in ("model", "backend") else "right")
     for name, backend in runners:
-        eager = f"{paired_ratio(times[name, backend], times[name, 'eager']):.3f}" if "eager" in backends else "-"
-        none = f"{paired_ratio(times[name, backend], times['none', backend]):.3f}" if "none" in configs else "-"
+        eager = ratio_cell(times[name, backend], times[name, "eager"]) if "eager" in backends else "-"
+        none = ratio_cell(times[name, backend], times["none", backend]) if "none" in configs else "-"
         table.add_row(
             name, backend, f"{statistics.median(times[name, backend]):.1f}", eager, none,
             f"{built[name][1][backend]:.1e}",
