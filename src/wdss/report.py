@@ -67,6 +67,7 @@ PAPER_LABELS = {
     "joint_bilateral_color": "Joint bilateral (colour)",
     "learned_bilateral": "Learned bilateral",
     "real_esrgan": "Real-ESRGAN",
+    "real_esrgan_demodulated": "Real-ESRGAN (demod.)",
     "nsrr": "NSRR",
     "fusesr": "FuseSR",
     "dfasr": "DFASR",

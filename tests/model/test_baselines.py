@@ -176,6 +176,38 @@ def test_real_esrgan_skip_starts_at_bicubic_of_the_tonemapped_lr():
         RRDBNet(skip=True, weights="/nowhere/RealESRGAN_x4plus.pth")
 
 
+def test_real_esrgan_demodulated_reads_the_irradiance_and_is_remodulated_with_the_hr_brdf():
+    data = batch(size=(18, 27), scale=3.0)
+    data["emission"] = 0.1 * torch.rand(2, 3, 18, 27)
+    module = SuperResolutionModule({**TINY_RRDB, "skip": True, "demodulated": True}, flip=False).eval()
+    assert module.net.inputs == ("lr", "brdf") and "lr_color" not in module.inputs and "emission" in module.inputs
+    torch.nn.init.zeros_(module.net.conv_last.weight)
+    torch.nn.init.zeros_(module.net.conv_last.bias)
+    # With no correction it is the bicubic upsampling of log1p(irradiance), remodulated, the emission added back.
+    log = torch.nn.functional.interpolate(torch.log1p(data["lr"]), size=(18, 27), mode="bicubic")
+    expected = torch.expm1(log.clamp(0, 20)) * data["brdf"] + data["emission"]
+    out = module({k: v for k, v in data.items() if k != "lr_color"})  # the colour is never read
+    assert out["display"] is None
+    torch.testing.assert_close(out["color"], expected)
+    # It learns through the same loss as the irradiance models (on the remodulated colour).
+    module.train()
+    torch.nn.init.normal_(module.net.conv_last.weight, std=1e-3)
+    assert len(losses_over_steps(module, data)) == 2
+    with pytest.raises(ValueError, match="trained on tone-mapped colour and need demodulated=false"):
+        RRDBNet(demodulated=True, weights="/nowhere/RealESRGAN_x4plus.pth")
+    with pytest.raises(ValueError, match="needs the batch key 'lr'"):
+        RRDBNet(**{k: v for k, v in TINY_RRDB.items() if k != "_target_"}, demodulated=True)(brdf=data["brdf"])
+
+
+def test_real_esrgan_demodulated_variant_is_the_published_network_on_the_irradiance():
+    from tests.test_train import compose_train
+
+    cfg = compose_train(["variant=real_esrgan_demodulated", "experiment=cpu"])
+    assert cfg.model.net._target_ == "wdss.model.rrdbnet.RRDBNet"
+    assert cfg.model.net.demodulated is True and cfg.model.net.skip is True
+    assert compose_train(["variant=real_esrgan"]).model.net.demodulated is False
+
+
 @pytest.mark.parametrize("variant", ["nsrr", "fusesr", "real_esrgan"])
 def test_cpu_experiment_turns_the_comparison_skips_on(variant):
     from tests.test_train import compose_train

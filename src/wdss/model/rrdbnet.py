@@ -6,6 +6,9 @@ run the network's native scale and resize to the frame. Without weights it must 
 (then tagged so in MLflow); :attr:`needs_training` lets the entry points refuse to evaluate random weights.
 ``skip=True`` (not the published network; ``recipe.skip``, on in ``experiment=cpu``) adds the output to the bicubic
 upsampling of the tone-mapped LR, so a network trained from scratch in minutes starts at bicubic.
+``demodulated=True`` (not the published method either; ``variant=real_esrgan_demodulated``) feeds it log1p of the
+demodulated LR irradiance instead and reads its output as log1p of the HR irradiance, which the module remodulates
+with the HR BRDF as it does WDSS's: the same generic network, given the one thing G-buffers add to the colour.
 """
 
 from __future__ import annotations
@@ -68,6 +71,7 @@ class RRDBNet(nn.Module):
         weights: str | None = None,
         tonemap_name: str = "hable",
         skip: bool = False,
+        demodulated: bool = False,
     ) -> None:
         super().__init__()
         if scale not in (2, 4):
@@ -76,7 +80,12 @@ class RRDBNet(nn.Module):
             raise ValueError(
                 "model.net.skip=true changes RRDBNet's output: published weights (model.net.weights) need skip=false"
             )
-        self.scale, self.tonemap_name, self.skip = scale, tonemap_name, bool(skip)
+        if demodulated and weights:
+            raise ValueError(
+                "model.net.demodulated=true feeds RRDBNet the demodulated irradiance: published weights "
+                "(model.net.weights) were trained on tone-mapped colour and need demodulated=false"
+            )
+        self.scale, self.tonemap_name, self.skip, self.demodulated = scale, tonemap_name, bool(skip), bool(demodulated)
         cin = 3 * (4 if scale == 2 else 1)
         self.conv_first = nn.Conv2d(cin, num_feat, 3, 1, 1)
         self.body = nn.Sequential(*[RRDB(num_feat, num_grow_ch) for _ in range(num_block)])
@@ -101,12 +110,15 @@ class RRDBNet(nn.Module):
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr_color", "brdf")
+        return ("lr" if self.demodulated else "lr_color", "brdf")
 
-    def forward(self, lr_color: Tensor, brdf: Tensor, **_: Tensor) -> dict:
+    def forward(self, brdf: Tensor, lr_color: Tensor | None = None, lr: Tensor | None = None, **_: Tensor) -> dict:
+        source = lr if self.demodulated else lr_color
+        if source is None:
+            raise ValueError(f"this RRDBNet (demodulated={self.demodulated}) needs the batch key {self.inputs[0]!r}")
         height, width = brdf.shape[-2:]
-        lh, lw = lr_color.shape[-2:]
-        x = tonemap(lr_color, self.tonemap_name)
+        lh, lw = source.shape[-2:]
+        x = torch.log1p(source.clamp_min(0)) if self.demodulated else tonemap(source, self.tonemap_name)
         base = F.interpolate(x, size=(height, width), mode="bicubic", align_corners=False) if self.skip else None
         if self.scale == 2:  # x2 = the x4 body on the pixel-unshuffled input (padded to even sizes)
             x = F.pixel_unshuffle(F.pad(x, (0, lw % 2, 0, lh % 2), mode="replicate"), 2)
@@ -119,5 +131,7 @@ class RRDBNet(nn.Module):
             out = F.interpolate(out, size=(height, width), mode="bicubic", align_corners=False, antialias=True)
         if base is not None:
             out = out + base
+        if self.demodulated:  # log1p of irradiance; 20 = log1p(4.9e8): far above any radiance, finite in float32
+            return {"display": None, "irradiance": torch.expm1(out.clamp(0.0, 20.0)), "coefficients": None}
         # Clamped for evaluation only: a clamp in training would zero the gradient of out-of-range pixels.
         return {"display": out if self.training else out.clamp(0.0, 1.0), "irradiance": None, "coefficients": None}
