@@ -509,7 +509,7 @@ def test_the_methods_sweep_runs_every_method_at_smoke_scale(tmp_path):
     client, runs = sweep_client(tmp_path, "methods")
     jobs = {r.data.tags.get("variant"): r for r in runs if "mlflow.parentRunId" in r.data.tags}
     methods = {"bicubic", "bilinear_demodulated", "joint_bilateral", "joint_bilateral_color", "learned_bilateral"}
-    methods |= {"real_esrgan", "nsrr", "fusesr", "dfasr"}
+    methods |= {"real_esrgan", "real_esrgan_demodulated", "nsrr", "fusesr", "dfasr"}
     assert set(jobs) == methods | {"none", "swt_db4"}
     assert all(r.info.status == "FINISHED" and "test/psnr_3x" in r.data.metrics for r in jobs.values())
     assert jobs["real_esrgan"].data.tags["weights"] == "trained-on-wdss-frames"
