@@ -19,6 +19,7 @@ from rich.console import Console
 from rich.table import Table
 
 from wdss.data.preprocess import prediction_color
+from wdss.model.blocks import from_log, to_log
 
 BASES = ("haar", "db4", "sym4")
 TABLE_WIDTH = 160  # columns of a table printed off a terminal
@@ -480,7 +481,7 @@ def bench_inference(
     backends: Sequence[str] = BACKENDS,
     warmup: int = 1,
     profile: bool = False,
-) -> Table | tuple[Table, Table]:
+) -> list[Table]:
     """Milliseconds per output frame of every configuration on every backend (CPU, paper widths), as an engine
     runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode.
 
@@ -525,7 +526,7 @@ def bench_inference(
             f"{built[name][1][backend]:.1e}",
         )  # fmt: skip
     if not profile:
-        return table
+        return [table]
     where = Table(title="where the time goes: profiled ms per frame by kind of work (difference to none)")
     for column in ("model", "backend", "profiled", *PROFILE_BUCKETS):
         where.add_column(column, justify="left" if column in ("model", "backend") else "right")
@@ -539,7 +540,7 @@ def bench_inference(
         cells = [cell(total, None if base is None else sum(base.values()))]
         cells += [cell(buckets[k], None if base is None else base[k]) for k in PROFILE_BUCKETS]
         where.add_row(name, backend, *cells)
-    return table, where
+    return [table, where]
 
 
 def bench_stability() -> Table:
@@ -628,15 +629,15 @@ class PlainReference(torch.nn.Module):
             upsampled = torch.nn.functional.interpolate(batch["lr"], size=size, mode="bilinear")
         else:
             upsampled = self.upsample(batch["lr"], batch["gbuffer"], batch.get("brdf"), batch.get("lr_brdf"))
-        base = torch.log1p(upsampled.clamp_min(0))
+        base = to_log(upsampled)
         parts = [base, batch["gbuffer"], batch["spatial_mask"]]
         if "history" in batch:
-            parts.append(torch.log1p(batch["history"].clamp_min(0)))
+            parts.append(to_log(batch["history"]))
         return base, torch.cat(parts, 1)
 
     def forward(self, batch: dict) -> dict:
         base, x = self.inputs(batch)
-        irradiance = torch.expm1((base + self.body(x)).clamp(0.0, 20.0))
+        irradiance = from_log(base + self.body(x))
         return {"irradiance": irradiance, "color": prediction_color(irradiance, batch), "coefficients": None}
 
 
@@ -865,7 +866,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         tables = bench_inference(
             tuple(args.size), args.scale, args.repeats, args.configs, args.backends, profile=args.profile
         )
-        for table in tables if isinstance(tables, tuple) else (tables,):
+        for table in tables:
             console.print(table)
 
 

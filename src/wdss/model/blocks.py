@@ -6,11 +6,25 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-__all__ = ["DoubleResidual", "GatedConv", "RIRBlock", "conv3x3", "scale_exit"]
+__all__ = ["DoubleResidual", "GatedConv", "RIRBlock", "conv3x3", "from_log", "scale_exit", "to_log"]
 
 
 def conv3x3(cin: int, cout: int, dilation: int = 1) -> nn.Conv2d:
     return nn.Conv2d(cin, cout, 3, padding=dilation, dilation=dilation)
+
+
+# The log1p space the networks read irradiance (and colour) in and predict it in.
+LOG_MAX = 20.0  # log1p(4.9e8): far above any radiance, far below float32 overflow in expm1
+
+
+def to_log(x: Tensor) -> Tensor:
+    """``log1p`` of non-negative values (negatives clamped to 0)."""
+    return torch.log1p(x.clamp_min(0))
+
+
+def from_log(x: Tensor) -> Tensor:
+    """The inverse of :func:`to_log`, clamped to ``[0, expm1(LOG_MAX)]``."""
+    return torch.expm1(x.clamp(0.0, LOG_MAX))
 
 
 EXIT_SCALE = 0.1

@@ -19,7 +19,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from wdss.model.blocks import DoubleResidual, scale_exit
+from wdss.model.blocks import DoubleResidual, from_log, scale_exit, to_log
 
 __all__ = ["FuseSR"]
 
@@ -52,7 +52,7 @@ class FuseSR(nn.Module):
         return ("lr", "lr_gbuffer", "gbuffer", "history", "history2")
 
     def _log(self, x: Tensor) -> Tensor:
-        return torch.log1p(x.clamp_min(0)) if self.input_log else x
+        return to_log(x) if self.input_log else x
 
     def forward(
         self, lr: Tensor, lr_gbuffer: Tensor, gbuffer: Tensor, history: Tensor, history2: Tensor, brdf: Tensor
@@ -72,5 +72,5 @@ class FuseSR(nn.Module):
         out = F.pixel_shuffle(self.up(torch.cat([x, fused], 1)), s)
         if self.skip:
             out = out + self._log(F.interpolate(lr.float(), size=(height, width), mode="bilinear", align_corners=False))
-        irradiance = torch.expm1(out.clamp(max=20.0)).clamp_min(0) if self.input_log else out.clamp_min(0)
+        irradiance = from_log(out) if self.input_log else out.clamp_min(0)
         return {"irradiance": irradiance, "coefficients": None}

@@ -22,7 +22,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from wdss.model.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3
+from wdss.model.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3, from_log, to_log
 from wdss.model.joint_bilateral import joint_bilateral_upsample
 from wdss.model.learned_bilateral import LearnedBilateralUpsample
 from wdss.wavelets import WaveletTransform
@@ -349,7 +349,7 @@ class WDSSNet(nn.Module):
         return keys + (("brdf", "lr_brdf") if self.upsampler is not None and self.upsampler.tap_brdf else ())
 
     def _to_input(self, x: Tensor) -> Tensor:
-        return torch.log1p(x.clamp_min(0)) if self.input_log else x
+        return to_log(x) if self.input_log else x
 
     def forward(
         self,
@@ -413,11 +413,11 @@ class WDSSNet(nn.Module):
     # ------------------------------------------------------------------------------------------ output space
 
     def _to_space(self, irradiance: Tensor) -> Tensor:
-        return torch.log1p(irradiance.float().clamp_min(0)) if self.output_space == "log" else irradiance.float()
+        return to_log(irradiance.float()) if self.output_space == "log" else irradiance.float()
 
     def _from_space(self, image: Tensor) -> Tensor:
-        if self.output_space == "log":  # 20 = log1p(4.9e8): far above any radiance, far below float32 overflow
-            return torch.expm1(image.clamp(0.0, 20.0))
+        if self.output_space == "log":
+            return from_log(image)
         return image.clamp_min(0.0)
 
     def _upsample(

@@ -20,7 +20,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from wdss.data.warp import warp_backward
-from wdss.model.blocks import scale_exit
+from wdss.model.blocks import from_log, scale_exit, to_log
 
 __all__ = ["NSRR", "zero_upsample"]
 
@@ -82,7 +82,7 @@ class NSRR(nn.Module):
         return ("lr_color", "lr_gbuffer", "prev_lr_color", "prev_lr_gbuffer", "motion")
 
     def _rgbd(self, color: Tensor, gbuffer: Tensor) -> Tensor:
-        color = torch.log1p(color.clamp_min(0)) if self.input_log else color
+        color = to_log(color) if self.input_log else color
         return torch.cat([color, gbuffer[:, :1]], 1)
 
     def forward(
@@ -110,7 +110,7 @@ class NSRR(nn.Module):
         color = self.out(x)
         if self.skip:
             upsampled = F.interpolate(lr_color.float(), size=size, mode="bilinear", align_corners=False)
-            color = color + (torch.log1p(upsampled.clamp_min(0)) if self.input_log else upsampled)
-        color = torch.expm1(color.clamp(max=20.0)).clamp_min(0) if self.input_log else color.clamp_min(0)
+            color = color + (to_log(upsampled) if self.input_log else upsampled)
+        color = from_log(color) if self.input_log else color.clamp_min(0)
         # NSRR reconstructs colour: colour / F goes through the shared remodulation unchanged.
         return {"irradiance": color / brdf, "coefficients": None}

@@ -20,7 +20,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from wdss.data.tonemap import tonemap
-from wdss.model.blocks import scale_exit
+from wdss.model.blocks import from_log, scale_exit, to_log
 
 __all__ = ["RRDBNet"]
 
@@ -118,7 +118,7 @@ class RRDBNet(nn.Module):
             raise ValueError(f"this RRDBNet (demodulated={self.demodulated}) needs the batch key {self.inputs[0]!r}")
         height, width = brdf.shape[-2:]
         lh, lw = source.shape[-2:]
-        x = torch.log1p(source.clamp_min(0)) if self.demodulated else tonemap(source, self.tonemap_name)
+        x = to_log(source) if self.demodulated else tonemap(source, self.tonemap_name)
         base = F.interpolate(x, size=(height, width), mode="bicubic", align_corners=False) if self.skip else None
         if self.scale == 2:  # x2 = the x4 body on the pixel-unshuffled input (padded to even sizes)
             x = F.pixel_unshuffle(F.pad(x, (0, lw % 2, 0, lh % 2), mode="replicate"), 2)
@@ -131,7 +131,7 @@ class RRDBNet(nn.Module):
             out = F.interpolate(out, size=(height, width), mode="bicubic", align_corners=False, antialias=True)
         if base is not None:
             out = out + base
-        if self.demodulated:  # log1p of irradiance; 20 = log1p(4.9e8): far above any radiance, finite in float32
-            return {"display": None, "irradiance": torch.expm1(out.clamp(0.0, 20.0)), "coefficients": None}
+        if self.demodulated:  # log1p of irradiance
+            return {"display": None, "irradiance": from_log(out), "coefficients": None}
         # Clamped for evaluation only: a clamp in training would zero the gradient of out-of-range pixels.
         return {"display": out if self.training else out.clamp(0.0, 1.0), "irradiance": None, "coefficients": None}
