@@ -405,7 +405,8 @@ def _inference_runners(
             session = ort_session(f"{tmp}/model.onnx")
             runners[backend] = lambda s=session, f=feed: torch.from_numpy(s.run(["color"], f)[0])
         else:
-            module = torch.compile(graph) if backend == "compile" else graph
+            # Frozen, as inference runs it: the weights become constants, which lets Inductor prepack them for oneDNN.
+            module = torch.compile(graph, options={"freezing": True}) if backend == "compile" else graph
             runners[backend] = lambda m=module: m(inputs)[0]
     if not reference.any():  # a network dead at initialisation: every backend would match it trivially
         raise RuntimeError(f"{net.__class__.__name__}'s colour is zero everywhere: the error column would say nothing")
@@ -483,7 +484,8 @@ def bench_inference(
     profile: bool = False,
 ) -> list[Table]:
     """Milliseconds per output frame of every configuration on every backend (CPU, paper widths), as an engine
-    runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode.
+    runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode;
+    torch.compile freezes the weights (``freezing``), as compiled inference does.
 
     All (configuration, backend) pairs are built first, then timed in the same interleaved rounds
     (:func:`interleaved_ms`); ratios are medians of the per-round ratios (paired), times medians of the rounds.

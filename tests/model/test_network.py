@@ -10,7 +10,7 @@ from torch.utils._python_dispatch import TorchDispatchMode
 
 from tests.model.helpers import TINY, batch
 from wdss.model.blocks import RIRBlock
-from wdss.model.network import WDSSNet
+from wdss.model.network import WDSSNet, shuffle_channels_last
 
 VARIANTS = [
     (t, b, h, temporal)
@@ -99,3 +99,18 @@ def test_eager_inference_copies_nothing_it_does_not_need(transform):
     assert not [args for name, args in ops.calls if name == "aten.cat" and len(args[0]) == 1]
     full = [args[0] for name, args in ops.calls if name == "aten.convolution" and args[0].shape[-2] >= 16]
     assert full and all(x.is_contiguous(memory_format=torch.channels_last) for x in full) == (transform == "swt")
+
+
+@pytest.mark.parametrize("shape", [(1, 48, 5, 7), (2, 12, 4, 6), (1, 4, 1, 1)])
+@pytest.mark.parametrize("channels_last", [False, True])
+def test_shuffle_channels_last_is_pixel_shuffle_in_channels_last(shape, channels_last):
+    x = torch.randn(shape, dtype=torch.float64, requires_grad=True)
+    given = x.contiguous(memory_format=torch.channels_last) if channels_last else x
+    out = shuffle_channels_last(given)
+    expected = torch.nn.functional.pixel_shuffle(x, 2)
+    assert torch.equal(out, expected)
+    assert out.is_contiguous(memory_format=torch.channels_last)
+    weight = torch.randn_like(expected)
+    (grad,) = torch.autograd.grad((out * weight).sum(), x)
+    (grad_expected,) = torch.autograd.grad((expected * weight).sum(), x)
+    assert torch.equal(grad, grad_expected)
