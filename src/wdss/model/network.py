@@ -25,6 +25,7 @@ from torch import Tensor, nn
 from wdss.model.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3, from_log, to_log
 from wdss.model.joint_bilateral import joint_bilateral_upsample
 from wdss.model.learned_bilateral import LearnedBilateralUpsample
+from wdss.model.polyphase import fits_cells, swt_tail_on_cells
 from wdss.wavelets import WaveletTransform
 
 __all__ = ["HEADS", "OUTPUT_SPACES", "RESIDUALS", "WIDTHS", "WDSSNet"]
@@ -406,6 +407,19 @@ class WDSSNet(nn.Module):
         coefficients: Tensor | None
         if self.transform == "none":
             image = self.exit(F.pixel_shuffle(merged, 2)).float()
+            if base is not None:
+                image = image + base
+            coefficients = None
+        elif (
+            self.transform == "swt"
+            and torch.compiler.is_exporting()
+            and fits_cells(merged, self.wavelet.filter_rows.shape[-1])
+        ):
+            # An exported graph computes the tail on the half-resolution cells (wdss.model.polyphase): onnxruntime runs
+            # it faster. Synthesis undoes analysis, so a residual base is added to the image, not to the subbands.
+            image = swt_tail_on_cells(
+                merged.float(), self.exit.weight.float(), self.exit.bias.float(), self.wavelet.filter_rows.float()
+            )
             if base is not None:
                 image = image + base
             coefficients = None
