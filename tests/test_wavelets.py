@@ -92,19 +92,26 @@ def test_synthesis_inverts_analysis(transform, wavelet, level, size, dtype):
     assert_close(back, x.double().numpy(), RTOL[dtype])
 
 
+@pytest.mark.parametrize("channels_last", (False, True), ids=("nchw", "channels_last"))
 @pytest.mark.parametrize("level,size", CASES, ids=lambda v: str(v))
 @pytest.mark.parametrize("wavelet", BASES)
 @pytest.mark.parametrize("transform", ("dwt", "swt"))
-def test_synthesis_of_any_coefficients_equals_pywavelets(transform, wavelet, level, size):
+def test_synthesis_of_any_coefficients_equals_pywavelets(transform, wavelet, level, size, channels_last):
     """On coefficients that no image produced, synthesis is PyWavelets' iswt2/waverec2 (the pseudo-inverse).
 
     1e-11 rather than 1e-12: PyWavelets' sym4 table is orthonormal to only ~5e-13, which its own inverse
-    carries; wdss orthonormalises the filters (its round trip above is exact to 1e-12).
+    carries; wdss orthonormalises the filters (its round trip above is exact to 1e-12). Channels-last SWT
+    subbands at least as large as the filter's span take the path without a padded copy.
     """
     c = 3
     shape = (2, coefficient_channels(transform, c, level), *(s >> (level if transform == "dwt" else 0) for s in size))
     coeffs = torch.randn(shape, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
-    ours = synthesis(coeffs, transform=transform, wavelet=wavelet, level=level)
+    ours = synthesis(
+        coeffs.contiguous(memory_format=torch.channels_last) if channels_last else coeffs,
+        transform=transform,
+        wavelet=wavelet,
+        level=level,
+    )
     arr = coeffs.numpy()
     if transform == "swt":
         pieces = [arr[:, :c]] + [
@@ -192,6 +199,17 @@ def test_gradients_flow_through_both_directions(transform, wavelet, level):
     assert torch.autograd.gradcheck(
         lambda t: synthesis(t, transform=transform, wavelet=wavelet, level=level), (c,), fast_mode=True
     )
+
+
+@pytest.mark.parametrize("wavelet", ("haar", "db4"))
+def test_channels_last_swt_synthesis_has_exact_gradients_eager_and_compiled(wavelet):
+    """The path without a padded copy writes the wrapped ends into its convolution's output in place."""
+    c = torch.rand(1, 8, 8, 9, dtype=torch.float64).contiguous(memory_format=torch.channels_last)
+    c.requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda t: synthesis(t, transform="swt", wavelet=wavelet), (c,), fast_mode=True)
+    compiled = torch.compile(lambda t: synthesis(t, transform="swt", wavelet=wavelet), backend="aot_eager")
+    expected = synthesis(c.detach(), transform="swt", wavelet=wavelet, level=1)
+    assert torch.allclose(compiled(c.detach()), expected, rtol=0, atol=1e-12)
 
 
 def test_module_moves_its_filters_and_keeps_them_out_of_checkpoints():

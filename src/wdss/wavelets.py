@@ -206,16 +206,48 @@ def _synthesis_step_w(rows: Tensor, channels: int, transposed: bool) -> Tensor:
     return weight if transposed else weight.transpose(0, 1).contiguous()
 
 
+def _circular_correlation(x: Tensor, weight: Tensor, dim: int, before: int, dilation: int, groups: int) -> Tensor:
+    """The correlation along ``dim`` (-2 rows, -1 columns) of ``x`` extended periodically, ``before`` samples in
+    front, without copying ``x`` into a padded buffer: a zero-padded convolution, whose outputs that reach across
+    the ends are then replaced by the correlation of the two ends joined (``x`` spans at least the filter)."""
+    taps = weight.shape[dim]
+    span = (taps - 1) * dilation
+    after = span - before
+    reach = max(before, after)  # symmetric zero padding; zero taps make up the difference
+    extra = ((reach - before) // dilation, (reach - after) // dilation)
+    if dim == -1:
+        conv = functools.partial(F.conv2d, dilation=(1, dilation), groups=groups)
+        out = conv(x, F.pad(weight, extra), padding=(0, reach))
+    else:
+        conv = functools.partial(F.conv2d, dilation=(dilation, 1), groups=groups)
+        out = conv(x, F.pad(weight, (0, 0, *extra)), padding=(reach, 0))
+    n = x.shape[dim]
+    # ends[j] = x[(n - span + j) mod n], so seam[j] is output (j - after) mod n: the last `after`, then the first.
+    seam = conv(torch.cat([x.narrow(dim, n - span, span), x.narrow(dim, 0, span)], dim=dim), weight)
+    out.narrow(dim, n - after, after).copy_(seam.narrow(dim, 0, after))
+    out.narrow(dim, 0, before).copy_(seam.narrow(dim, after, before))
+    return out
+
+
 def _swt_synthesis_level(coeffs: Tensor, rows: Tensor, *, dilation: int) -> Tensor:
     """(N, 4C, H, W) band-major -> (N, C, H, W): half the adjoint per axis (the frame's pseudo-inverse)."""
     c = coeffs.shape[1] // 4
     taps = rows.shape[-1]
     left, right = _analysis_pads(taps, dilation)
-    # The adjoint of a correlation with the flipped filter correlates with the filter itself, pads swapped.
-    padded = _circular_pad(coeffs, right, left, right, left)
     half = 0.5 * rows
-    along_h = F.conv2d(padded, _synthesis_step_h(half, c, False), dilation=(dilation, 1), groups=2)
-    return F.conv2d(along_h, _synthesis_step_w(half, c, False), dilation=(1, dilation))
+    along_h, along_w = _synthesis_step_h(half, c, False), _synthesis_step_w(half, c, False)
+    # The adjoint of a correlation with the flipped filter correlates with the filter itself, pads swapped.
+    if (
+        coeffs.is_contiguous(memory_format=torch.channels_last)
+        and min(coeffs.shape[-2:]) >= left + right
+        and not torch.compiler.is_exporting()
+    ):
+        # Already in the convolutions' fast layout (the network's subbands are): no padded copy (-24 ms at 1080p).
+        rows_done = _circular_correlation(coeffs, along_h, -2, right, dilation, groups=2)
+        return _circular_correlation(rows_done, along_w, -1, right, dilation, groups=1)
+    padded = _circular_pad(coeffs, right, left, right, left)
+    rows_done = F.conv2d(padded, along_h, dilation=(dilation, 1), groups=2)
+    return F.conv2d(rows_done, along_w, dilation=(1, dilation))
 
 
 def _dwt_synthesis_level(coeffs: Tensor, rows: Tensor) -> Tensor:

