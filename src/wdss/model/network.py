@@ -426,8 +426,7 @@ class WDSSNet(nn.Module):
         else:
             if self.transform == "swt":
                 # Channels-last from here on: on CPU the exit convolution of 12 full-resolution channels runs
-                # ~1.35x faster in it, the shuffle ~2.5x and the synthesis' padding ~2.5x (the SWT tail -15 % at
-                # 1080p).
+                # ~1.35x faster in it, the shuffle ~2.5x and the synthesis' convolutions 2-3x, without a padded copy.
                 merged = shuffle_channels_last(merged)
             coefficients = self.exit(merged).float()
             # The synthesis stays float32 under mixed precision: it sums large subbands that nearly cancel.
