@@ -83,6 +83,25 @@ def test_inference_table_times_every_backend_with_ratios(capsys):
     assert float(where["none", "eager"][3]) == float(where["none", "onnxruntime"][3]) == 0
 
 
+def test_inference_in_half_precision_stays_close_to_float32(capsys):
+    argv = ["inference", "--size", "16", "32", "--repeats", "1", "--configs", "SWT-db4", "--threads", "1"]
+    bench.main([*argv, "--backends", "eager", "onnxruntime", "--fp16"])
+    rows = table_rows(capsys.readouterr().out)
+    assert {backend for name, backend in rows if name == "SWT-db4"} == {"eager", "onnxruntime"}
+    for backend in ("eager", "onnxruntime"):
+        assert 0 < float(rows["SWT-db4", backend][-1]) <= 1e-2  # half precision: close to float32, not equal
+
+
+def test_inference_refuses_backends_its_device_cannot_run():
+    with pytest.raises(ValueError, match="cudagraphs backend records CUDA graphs: it needs --device cuda"):
+        bench.bench_inference((16, 32), 2.0, 1, ["none"], ["eager", "cudagraphs"])
+    with pytest.raises(ValueError, match="onnxruntime is timed on the CPU only"):
+        bench.bench_inference((16, 32), 2.0, 1, ["none"], ["onnxruntime"], device="cuda")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="--device cuda: torch sees no CUDA device"):
+            bench.bench_inference((16, 32), 2.0, 1, ["none"], ["eager", "cudagraphs"], device="cuda")
+
+
 def test_profile_buckets_sort_work_by_what_ran():
     """Eager and compile: torch's operators by self time (a convolution's dispatch layers are not counted twice)."""
     import torch.nn.functional as F

@@ -368,6 +368,9 @@ INFERENCE_CONFIGS = {
     "DFASR": DFASR,
 }
 BACKENDS = ("eager", "compile", "onnxruntime")
+# On a GPU onnxruntime is left out (its CPU provider is what wdss installs) and CUDA graphs come in: torch.compile's
+# "reduce-overhead" mode records the compiled graph once and replays it, so no kernel is launched from Python.
+GPU_BACKENDS = ("eager", "compile", "cudagraphs")
 
 
 def ort_session(path: str, profile: bool = False):
@@ -384,34 +387,61 @@ def ort_session(path: str, profile: bool = False):
     return onnxruntime.InferenceSession(path, options, providers=["CPUExecutionProvider"])
 
 
+def _check_backends(backends: Sequence[str], device: str) -> None:
+    if device == "cpu" and "cudagraphs" in backends:
+        raise ValueError("the cudagraphs backend records CUDA graphs: it needs --device cuda")
+    if device != "cpu" and "onnxruntime" in backends:
+        raise ValueError(
+            "onnxruntime is timed on the CPU only (wdss installs its CPU provider): leave it out of --backends on "
+            f"{device}"
+        )
+    if device != "cpu" and not torch.cuda.is_available():
+        raise ValueError(f"--device {device}: torch sees no CUDA device here")
+
+
 def _inference_runners(
-    net: torch.nn.Module, height: int, width: int, scale: float, backends: Sequence[str], tmp: str
+    net: torch.nn.Module,
+    height: int,
+    width: int,
+    scale: float,
+    backends: Sequence[str],
+    tmp: str,
+    device: str = "cpu",
+    fp16: bool = False,
 ) -> tuple[dict[str, Callable[[], object]], dict[str, float], dict]:
     """A zero-argument callable per backend, all on the same example inputs and weights, each one's
-    max |difference| / max against eager's colour, and the inputs as onnxruntime's feed (the graph is in ``tmp``)."""
-    import numpy as np
-
+    max |difference| / max against float32 eager's colour, and the inputs as onnxruntime's feed (the graph is in
+    ``tmp``). ``fp16`` runs the graph and its inputs in half precision, as the fp16 export does."""
     from wdss.export import export_onnx, relative_error
     from wdss.model.module import SuperResolutionModule
 
     # The export folds RIR blocks in place and returns the graph every backend runs: network + remodulation.
     graph, inputs, reference = export_onnx(
-        SuperResolutionModule(net), f"{tmp}/model.onnx", height=height, width=width, scale=scale
+        SuperResolutionModule(net), f"{tmp}/model.onnx", height=height, width=width, scale=scale, fp16=fp16
     )
-    runners: dict[str, Callable[[], object]] = {}
     feed = {k: v.numpy() for k, v in inputs.items()}
+    graph = graph.to(device)
+    inputs = {k: v.to(device) for k, v in inputs.items()}
+    runners: dict[str, Callable[[], object]] = {}
     for backend in backends:
         if backend == "onnxruntime":
             session = ort_session(f"{tmp}/model.onnx")
             runners[backend] = lambda s=session, f=feed: torch.from_numpy(s.run(["color"], f)[0])
-        else:
+            continue
+        if backend == "compile":
             # Frozen, as inference runs it: the weights become constants, which lets Inductor prepack them for oneDNN.
-            module = torch.compile(graph, options={"freezing": True}) if backend == "compile" else graph
-            runners[backend] = lambda m=module: m(inputs)[0]
+            module = torch.compile(graph, options={"freezing": True})
+        elif backend == "cudagraphs":
+            module = torch.compile(graph, mode="reduce-overhead")
+        else:
+            module = graph
+        runners[backend] = lambda m=module: m(inputs)[0]
     if not reference.any():  # a network dead at initialisation: every backend would match it trivially
         raise RuntimeError(f"{net.__class__.__name__}'s colour is zero everywhere: the error column would say nothing")
-    with torch.inference_mode():  # the first call also compiles
-        errors = {backend: relative_error(np.asarray(run()), reference.numpy()) for backend, run in runners.items()}
+    with torch.inference_mode():  # the first call also compiles (CUDA graphs: the first calls record)
+        errors = {
+            backend: relative_error(run().float().cpu().numpy(), reference.numpy()) for backend, run in runners.items()
+        }
     return runners, errors, feed
 
 
@@ -482,10 +512,13 @@ def bench_inference(
     backends: Sequence[str] = BACKENDS,
     warmup: int = 1,
     profile: bool = False,
+    device: str = "cpu",
+    fp16: bool = False,
 ) -> list[Table]:
-    """Milliseconds per output frame of every configuration on every backend (CPU, paper widths), as an engine
+    """Milliseconds per output frame of every configuration on every backend (paper widths), as an engine
     runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode;
-    torch.compile freezes the weights (``freezing``), as compiled inference does.
+    torch.compile freezes the weights (``freezing``), as compiled inference does. On a GPU (``device="cuda"``) the
+    backends are :data:`GPU_BACKENDS`; ``fp16`` runs graph and inputs in half precision.
 
     All (configuration, backend) pairs are built first, then timed in the same interleaved rounds
     (:func:`interleaved_ms`); ratios are medians of the per-round ratios (paired), times medians of the rounds.
@@ -497,13 +530,16 @@ def bench_inference(
 
     from wdss.model.network import WDSSNet
 
+    _check_backends(backends, device)
+    if profile and device != "cpu":
+        raise ValueError("--profile reads CPU profilers: time a GPU without it")
     height, width = size
     with tempfile.TemporaryDirectory() as tmp:
         built = {}
         for name in configs:
             torch.manual_seed(0)  # the same weights on every run: a rerun times the same networks
             net = WDSSNet(**INFERENCE_CONFIGS[name]).eval()
-            built[name] = _inference_runners(net, height, width, scale, backends, f"{tmp}/{name}")
+            built[name] = _inference_runners(net, height, width, scale, backends, f"{tmp}/{name}", device, fp16)
         runners = {(name, backend): built[name][0][backend] for name in configs for backend in backends}
         with torch.inference_mode():
             times = interleaved_ms(runners, repeats, warmup)
@@ -516,8 +552,9 @@ def bench_inference(
                         run = lambda s=session, f=built[name][2]: s.run(["color"], f)  # noqa: E731
                     spent[name, backend] = profile_buckets(run, backend, session)
 
-    threads = torch.get_num_threads()
-    table = Table(title=f"ms per {width}x{height} frame at {scale:g}x, CPU, {threads} threads, {repeats} rounds")
+    where_run = f"CPU, {torch.get_num_threads()} threads" if device == "cpu" else torch.cuda.get_device_name(device)
+    precision = ", fp16" if fp16 else ""
+    table = Table(title=f"ms per {width}x{height} frame at {scale:g}x, {where_run}{precision}, {repeats} rounds")
     for column in ("model", "backend", "ms / frame", "time / eager", "time / none", "max rel. error"):
         table.add_column(column, justify="left" if column in ("model", "backend") else "right")
     for name, backend in runners:
@@ -811,12 +848,19 @@ def main(argv: Sequence[str] | None = None) -> None:
     model.add_argument("--repeats", type=int, default=3)
     model.add_argument("--widths", choices=("paper", "small"), default="paper")
     model.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
-    inf = sub.add_parser("inference", help="ms per frame on torch eager, torch.compile and onnxruntime (CPU)")
+    inf = sub.add_parser(
+        "inference", help="ms per frame on torch eager, torch.compile and onnxruntime (CPU) or CUDA graphs (GPU)"
+    )
     inf.add_argument("--size", type=int, nargs=2, default=(1080, 1920), metavar=("H", "W"))
     inf.add_argument("--scale", type=float, default=2.0)
     inf.add_argument("--repeats", type=int, default=10)
     inf.add_argument("--configs", nargs="+", choices=list(INFERENCE_CONFIGS), default=list(INFERENCE_CONFIGS))
-    inf.add_argument("--backends", nargs="+", choices=list(BACKENDS), default=list(BACKENDS))
+    inf.add_argument(
+        "--backends", nargs="+", choices=list(dict.fromkeys(BACKENDS + GPU_BACKENDS)), default=None,
+        help=f"default: {' '.join(BACKENDS)} on the CPU, {' '.join(GPU_BACKENDS)} on a GPU",
+    )  # fmt: skip
+    inf.add_argument("--device", default="cpu", help="cpu, or cuda (a GPU: eager, compile and CUDA graphs)")
+    inf.add_argument("--fp16", action="store_true", help="graph and inputs in half precision")
     inf.add_argument("--threads", type=int, default=None, help="CPU threads of every backend (default: torch's)")
     inf.add_argument("--profile", action="store_true", help="also where the time goes, by kind of work (profilers)")
     sub.add_parser("stability", help="stiff and extreme cases: worst relative error, finiteness")
@@ -865,9 +909,11 @@ def main(argv: Sequence[str] | None = None) -> None:
     elif args.what == "inference":
         if args.threads:
             torch.set_num_threads(args.threads)
+        backends = args.backends or (BACKENDS if args.device == "cpu" else GPU_BACKENDS)
         tables = bench_inference(
-            tuple(args.size), args.scale, args.repeats, args.configs, args.backends, profile=args.profile
-        )
+            tuple(args.size), args.scale, args.repeats, args.configs, backends, profile=args.profile,
+            device=args.device, fp16=args.fp16,
+        )  # fmt: skip
         for table in tables:
             console.print(table)
 
