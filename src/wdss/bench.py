@@ -387,7 +387,9 @@ def ort_session(path: str, profile: bool = False):
     return onnxruntime.InferenceSession(path, options, providers=["CPUExecutionProvider"])
 
 
-def _check_backends(backends: Sequence[str], device: str) -> None:
+def _check_backends(backends: Sequence[str], device: str, profile: bool) -> None:
+    if profile and device != "cpu":
+        raise ValueError("--profile reads CPU profilers: time a GPU without it")
     if device == "cpu" and "cudagraphs" in backends:
         raise ValueError("the cudagraphs backend records CUDA graphs: it needs --device cuda")
     if device != "cpu" and "onnxruntime" in backends:
@@ -509,7 +511,7 @@ def bench_inference(
     scale: float,
     repeats: int,
     configs: Sequence[str] = tuple(INFERENCE_CONFIGS),
-    backends: Sequence[str] = BACKENDS,
+    backends: Sequence[str] | None = None,
     warmup: int = 1,
     profile: bool = False,
     device: str = "cpu",
@@ -517,8 +519,9 @@ def bench_inference(
 ) -> list[Table]:
     """Milliseconds per output frame of every configuration on every backend (paper widths), as an engine
     runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode;
-    torch.compile freezes the weights (``freezing``), as compiled inference does. On a GPU (``device="cuda"``) the
-    backends are :data:`GPU_BACKENDS`; ``fp16`` runs graph and inputs in half precision.
+    torch.compile freezes the weights (``freezing``), as compiled inference does. ``backends`` default to
+    :data:`BACKENDS` on the CPU and :data:`GPU_BACKENDS` on a GPU (``device="cuda"``); ``fp16`` runs graph and inputs
+    in half precision.
 
     All (configuration, backend) pairs are built first, then timed in the same interleaved rounds
     (:func:`interleaved_ms`); ratios are medians of the per-round ratios (paired), times medians of the rounds.
@@ -530,9 +533,8 @@ def bench_inference(
 
     from wdss.model.network import WDSSNet
 
-    _check_backends(backends, device)
-    if profile and device != "cpu":
-        raise ValueError("--profile reads CPU profilers: time a GPU without it")
+    backends = backends or (BACKENDS if device == "cpu" else GPU_BACKENDS)
+    _check_backends(backends, device, profile)
     height, width = size
     with tempfile.TemporaryDirectory() as tmp:
         built = {}
@@ -909,9 +911,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     elif args.what == "inference":
         if args.threads:
             torch.set_num_threads(args.threads)
-        backends = args.backends or (BACKENDS if args.device == "cpu" else GPU_BACKENDS)
         tables = bench_inference(
-            tuple(args.size), args.scale, args.repeats, args.configs, backends, profile=args.profile,
+            tuple(args.size), args.scale, args.repeats, args.configs, args.backends, profile=args.profile,
             device=args.device, fp16=args.fp16,
         )  # fmt: skip
         for table in tables:
