@@ -98,7 +98,9 @@ class InferenceGraph(nn.Module):
         return (*names, "brdf") if "brdf" not in names else tuple(names)
 
     def forward(self, inputs: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
-        irradiance = self.net(**{k: inputs[k] for k in self.net_args if k in inputs})["irradiance"]
+        # Only the image: a network that can skip its subbands (WDSSNet) then takes its faster tail.
+        image_only = {"subbands": False} if "subbands" in self.net_args else {}
+        irradiance = self.net(**{k: inputs[k] for k in self.net_args if k in inputs}, **image_only)["irradiance"]
         return irradiance * inputs["brdf"], irradiance
 
 

@@ -1,4 +1,4 @@
-"""Convolutions rewritten on 2x2 cells, and the SWT tail an exported graph computes on them."""
+"""Convolutions rewritten on 2x2 cells, and the SWT tail inference graphs compute on them."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ import wdss.model.network as network
 from wdss.export import export_onnx, run_onnx
 from wdss.model.module import SuperResolutionModule
 from wdss.model.network import WIDTHS, WDSSNet
-from wdss.model.polyphase import polyphase_weight, swt_tail_on_cells
+from wdss.model.polyphase import fits_cells, polyphase_weight, swt_tail_on_cells
+from wdss.model.profile import dummy_inputs
 from wdss.wavelets import WaveletTransform
 
 
@@ -41,18 +42,74 @@ def test_a_convolution_rewritten_on_cells_gives_the_same_pixels(shift_in, shift_
     assert torch.allclose(image, pixels, rtol=0, atol=1e-12)
 
 
+def direct_tail(
+    merged: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor, wavelet: WaveletTransform
+) -> torch.Tensor:
+    return wavelet(F.conv2d(F.pixel_shuffle(merged, 2), weight, bias, padding=1))
+
+
 @pytest.mark.parametrize("basis", ["haar", "db2", "db4", "sym4"])
 @pytest.mark.parametrize("cells", [(5, 7), (8, 12)])
-def test_the_swt_tail_on_cells_is_the_direct_tail(basis, cells):
+@pytest.mark.parametrize("memory_format", [torch.contiguous_format, torch.channels_last])
+def test_the_swt_tail_on_cells_is_the_direct_tail(basis, cells, memory_format):
     """synthesis(exit(pixel_shuffle(merged))) with circular boundaries, including the seams where it wraps."""
     torch.manual_seed(1)
-    merged = torch.randn(2, 48, *cells, dtype=torch.float64)
+    merged = torch.randn(2, 48, *cells, dtype=torch.float64).contiguous(memory_format=memory_format)
     weight, bias = torch.randn(12, 12, 3, 3, dtype=torch.float64), torch.randn(12, dtype=torch.float64)
     wavelet = WaveletTransform("swt", basis).double()
-    direct = wavelet(F.conv2d(F.pixel_shuffle(merged, 2), weight, bias, padding=1))
+    direct = direct_tail(merged, weight, bias, wavelet)
     on_cells = swt_tail_on_cells(merged, weight, bias, wavelet.filter_rows)
     assert on_cells.shape == direct.shape == (2, 3, 2 * cells[0], 2 * cells[1])
     assert (on_cells - direct).abs().max() <= 1e-12 * direct.abs().max()
+
+
+@pytest.mark.parametrize("basis", ["haar", "db2", "db4", "db8"])
+def test_the_tail_on_cells_holds_on_the_smallest_frame_it_takes(basis):
+    """At the fewest cells fits_cells allows, the seams at the two ends of each axis meet."""
+    wavelet = WaveletTransform("swt", basis).double()
+    taps = wavelet.filter_rows.shape[-1]
+    torch.manual_seed(2)
+    merged = torch.randn(1, 48, taps // 2 + 1, taps // 2 + 2, dtype=torch.float64)
+    assert fits_cells(merged, taps) and not fits_cells(merged[..., :-1, :], taps)
+    weight, bias = torch.randn(12, 12, 3, 3, dtype=torch.float64), torch.randn(12, dtype=torch.float64)
+    direct = direct_tail(merged, weight, bias, wavelet)
+    assert (
+        swt_tail_on_cells(merged, weight, bias, wavelet.filter_rows) - direct
+    ).abs().max() <= 1e-12 * direct.abs().max()
+
+
+def test_the_tail_on_cells_has_exact_gradients():
+    """The seams are written in place into the convolutions' outputs: autograd must see through those writes."""
+    torch.manual_seed(3)
+    rows = WaveletTransform("swt", "db2").double().filter_rows
+    merged = torch.randn(1, 16, 4, 5, dtype=torch.float64, requires_grad=True)
+    weight = torch.randn(4, 4, 3, 3, dtype=torch.float64, requires_grad=True)
+    bias = torch.randn(4, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda m, w, b: swt_tail_on_cells(m, w, b, rows), (merged, weight, bias))
+
+
+def test_a_channels_last_network_without_subbands_computes_its_tail_on_cells(monkeypatch):
+    calls = []
+
+    def spy(*args):
+        calls.append(args[0].shape)
+        return swt_tail_on_cells(*args)
+
+    monkeypatch.setattr(network, "swt_tail_on_cells", spy)
+    torch.manual_seed(0)
+    net = WDSSNet("swt", "db4", residual="bilinear", exit_init=1.0, **WIDTHS["tiny"]).eval()
+    inputs = dummy_inputs(net, 32, 48, 2.0)
+    with torch.no_grad():
+        expected = net(**inputs)["irradiance"]
+        nchw = net(**inputs, subbands=False)  # NCHW cells: the direct form, which is faster there
+        assert not calls
+        net = net.to(memory_format=torch.channels_last)
+        with_subbands = net(**inputs)
+        assert not calls and with_subbands["coefficients"] is not None
+        image_only = net(**inputs, subbands=False)
+    assert len(calls) == 1 and image_only["coefficients"] is None
+    for out in (nchw, with_subbands, image_only):
+        assert (out["irradiance"] - expected).abs().max() <= 1e-5 * expected.abs().max()
 
 
 @pytest.mark.parametrize("size,takes_cells", [((32, 48), True), ((8, 12), False)])

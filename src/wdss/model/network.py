@@ -378,7 +378,13 @@ class WDSSNet(nn.Module):
         temporal_mask: Tensor | None = None,
         brdf: Tensor | None = None,
         lr_brdf: Tensor | None = None,
+        *,
+        subbands: bool = True,
     ) -> dict[str, Tensor | None]:
+        """``subbands``: also return the predicted wavelet coefficients (``coefficients``; the wavelet loss and the
+        subband panels read them). An inference graph that needs only the image passes False: the SWT head of a
+        channels-last network then computes its tail on half-resolution cells (:mod:`wdss.model.polyphase`) and
+        returns no coefficients, as exported graphs always do."""
         height, width = gbuffer.shape[-2:]
         pad_hr = (0, width % 2, 0, height % 2)
         pad_lr = (0, lr.shape[-1] % 2, 0, lr.shape[-2] % 2)
@@ -412,11 +418,15 @@ class WDSSNet(nn.Module):
             coefficients = None
         elif (
             self.transform == "swt"
-            and torch.compiler.is_exporting()
+            and (
+                torch.compiler.is_exporting()
+                or (not subbands and merged.is_contiguous(memory_format=torch.channels_last))
+            )
             and fits_cells(merged, self.wavelet.filter_rows.shape[-1])
         ):
-            # An exported graph computes the tail on the half-resolution cells (wdss.model.polyphase): onnxruntime runs
-            # it faster. Synthesis undoes analysis, so a residual base is added to the image, not to the subbands.
+            # Without the subbands, on channels-last cells and in exported graphs, the tail runs on the half-resolution
+            # cells (wdss.model.polyphase), which is faster there. Synthesis undoes analysis, so a residual base is
+            # added to the image, not to the subbands.
             image = swt_tail_on_cells(
                 merged.float(), self.exit.weight.float(), self.exit.bias.float(), self.wavelet.filter_rows.float()
             )
