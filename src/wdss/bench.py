@@ -423,7 +423,7 @@ def _inference_runners(
     )
     feed = {k: v.numpy() for k, v in inputs.items()}
     # torch runs the graph channels-last, the layout engines feed: oneDNN's convolutions then skip their reorders
-    # (eager at 1080p 2x: 1.33x faster than NCHW), and the SWT head computes its tail on cells (wdss.model.polyphase).
+    # (eager none at 1080p 2x: 5162 vs 6864 ms), and the SWT head computes its tail on cells (wdss.model.polyphase).
     graph = graph.to(device, memory_format=torch.channels_last)
     inputs = {k: v.to(device, memory_format=torch.channels_last) if v.dim() == 4 else v for k, v in inputs.items()}
     runners: dict[str, Callable[[], object]] = {}
@@ -521,9 +521,9 @@ def bench_inference(
 ) -> list[Table]:
     """Milliseconds per output frame of every configuration on every backend (paper widths), as an engine
     runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode; torch runs
-    it channels-last, and torch.compile freezes the weights (``freezing``), as compiled inference does. ``backends`` default to
-    :data:`BACKENDS` on the CPU and :data:`GPU_BACKENDS` on a GPU (``device="cuda"``); ``fp16`` runs graph and inputs
-    in half precision.
+    it channels-last, and torch.compile freezes the weights (``freezing``), as compiled inference does. ``backends``
+    default to :data:`BACKENDS` on the CPU and :data:`GPU_BACKENDS` on a GPU (``device="cuda"``); ``fp16`` runs graph
+    and inputs in half precision.
 
     All (configuration, backend) pairs are built first, then timed in the same interleaved rounds
     (:func:`interleaved_ms`); ratios are medians of the per-round ratios (paired), times medians of the rounds.
