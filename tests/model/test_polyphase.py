@@ -88,7 +88,9 @@ def test_the_tail_on_cells_has_exact_gradients():
     assert torch.autograd.gradcheck(lambda m, w, b: swt_tail_on_cells(m, w, b, rows), (merged, weight, bias))
 
 
-def test_a_channels_last_network_without_subbands_computes_its_tail_on_cells(monkeypatch):
+@pytest.fixture
+def tail_calls(monkeypatch) -> list:
+    """The shapes of ``merged`` each time the network computes its tail on cells."""
     calls = []
 
     def spy(*args):
@@ -96,37 +98,37 @@ def test_a_channels_last_network_without_subbands_computes_its_tail_on_cells(mon
         return swt_tail_on_cells(*args)
 
     monkeypatch.setattr(network, "swt_tail_on_cells", spy)
+    return calls
+
+
+def tiny_swt_net() -> WDSSNet:
     torch.manual_seed(0)
-    net = WDSSNet("swt", "db4", residual="bilinear", exit_init=1.0, **WIDTHS["tiny"]).eval()
+    return WDSSNet("swt", "db4", residual="bilinear", exit_init=1.0, **WIDTHS["tiny"]).eval()
+
+
+def test_a_channels_last_network_without_subbands_computes_its_tail_on_cells(tail_calls):
+    net = tiny_swt_net()
     inputs = dummy_inputs(net, 32, 48, 2.0)
     with torch.no_grad():
         expected = net(**inputs)["irradiance"]
         nchw = net(**inputs, subbands=False)  # NCHW cells: the direct form, which is faster there
-        assert not calls
+        assert not tail_calls
         net = net.to(memory_format=torch.channels_last)
         with_subbands = net(**inputs)
-        assert not calls and with_subbands["coefficients"] is not None
+        assert not tail_calls and with_subbands["coefficients"] is not None
         image_only = net(**inputs, subbands=False)
-    assert len(calls) == 1 and image_only["coefficients"] is None
+    assert len(tail_calls) == 1 and image_only["coefficients"] is None
     for out in (nchw, with_subbands, image_only):
         assert (out["irradiance"] - expected).abs().max() <= 1e-5 * expected.abs().max()
 
 
 @pytest.mark.parametrize("size,takes_cells", [((32, 48), True), ((8, 12), False)])
 def test_an_exported_swt_network_computes_its_tail_on_cells_where_the_frame_allows(
-    size, takes_cells, monkeypatch, tmp_path
+    size, takes_cells, tail_calls, tmp_path
 ):
-    calls = []
-
-    def spy(*args):
-        calls.append(args[0].shape)
-        return swt_tail_on_cells(*args)
-
-    monkeypatch.setattr(network, "swt_tail_on_cells", spy)
-    torch.manual_seed(0)
-    net = WDSSNet("swt", "db4", residual="bilinear", exit_init=1.0, **WIDTHS["tiny"]).eval()
+    net = tiny_swt_net()
     path = tmp_path / "swt.onnx"
     graph, inputs, reference = export_onnx(SuperResolutionModule(net), path, height=size[0], width=size[1], scale=2.0)
-    assert bool(calls) == takes_cells
+    assert bool(tail_calls) == takes_cells
     color = run_onnx(path, {k: v.numpy() for k, v in inputs.items()})["color"]
     assert np.abs(color - reference.numpy()).max() <= 1e-5 * np.abs(reference.numpy()).max()
