@@ -29,8 +29,21 @@ def test_tables_print_whole_off_a_terminal(monkeypatch, capsys):
     table.add_row("swt", "db4", "shared_inr", "0.575 M", "135.7", "0.33%", "3512", "1.135", "1.092")
     monkeypatch.setattr(bench, "bench_model", lambda *args: table)
     bench.main(["model"])
-    rows = table_rows(capsys.readouterr().out)
-    assert rows["swt", "db4"] == ["shared_inr", "0.575 M", "135.7", "0.33%", "3512", "1.135", "1.092"]
+    out = capsys.readouterr().out
+    assert table_rows(out)["swt", "db4"] == ["shared_inr", "0.575 M", "135.7", "0.33%", "3512", "1.135", "1.092"]
+    assert "the C library's default malloc" in out  # the timing tables say how memory was allocated
+
+
+@pytest.mark.parametrize("argv,restarts", [([], True), (["--system-malloc"], False)])
+def test_the_timing_command_starts_again_under_the_malloc_tunables(argv, restarts, monkeypatch, capsys):
+    restarted = []
+    monkeypatch.setattr(bench, "restart_with_retained_memory", lambda: restarted.append(True))
+    table = Table("model", title="timed")
+    monkeypatch.setattr(bench, "bench_inference", lambda *args, **kwargs: [table])
+    bench.main(["inference", *argv], restart=True)
+    bench.main(["inference"])  # called as a function (tests, notebooks): never
+    assert restarted == [True] * restarts
+    assert "timed" in capsys.readouterr().out
 
 
 def test_runners_are_timed_in_interleaved_rounds_each_starting_one_later():

@@ -32,10 +32,11 @@ def written(out_dir, frames) -> dict[int, np.ndarray]:
     return {f: sequence.read(f, sequence.hr, ["color"])["color"] for f in frames}
 
 
-def test_upscale_writes_frames_that_wdss_reads_back_and_prints_the_metrics(tmp_path, capsys):
+def test_upscale_writes_frames_that_wdss_reads_back_and_prints_the_metrics(tmp_path, capsys, tail_calls):
     ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "transform=swt", "basis=haar")
     out = tmp_path / "up"
     metrics = upscale(compose_upscale(tmp_path, f"ckpt_path={ckpt}", f"input={FIXTURE}", f"output={out}"))
+    assert len(tail_calls) == 5  # channels-last, image only: the SWT tail ran on cells, as engines run it
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True).eval()
     with torch.no_grad():  # the same model on the same frames through the data path (history: the input's)
         expected = {int(b["frame"][0]): module(b)["color"][0].numpy() for b in fixture_batches(module.inputs)}

@@ -19,10 +19,12 @@ from rich.console import Console
 from rich.table import Table
 
 from wdss.data.preprocess import prediction_color
+from wdss.memory import memory_retained, restart_with_retained_memory
 from wdss.model.blocks import from_log, to_log
 
 BASES = ("haar", "db4", "sym4")
 TABLE_WIDTH = 160  # columns of a table printed off a terminal
+SYSTEM_MALLOC = "time under glibc's default malloc, which unmaps large blocks when freed (see wdss.memory)"
 
 
 def median_ms(fn: Callable[[], object], *, repeats: int, warmup: int = 1) -> float:
@@ -827,7 +829,9 @@ def bench_bandlimit(
     return table
 
 
-def main(argv: Sequence[str] | None = None) -> None:
+def main(argv: Sequence[str] | None = None, *, restart: bool = False) -> None:
+    """``restart``: the command line's process, which the timing benchmarks may start again under
+    :mod:`wdss.memory`'s malloc tunables."""
     parser = argparse.ArgumentParser(prog="python -m wdss.bench", description=__doc__)
     sub = parser.add_subparsers(dest="what", required=True)
     wav = sub.add_parser("wavelets", help="DWT/SWT analysis+synthesis against ptwt")
@@ -852,6 +856,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     model.add_argument("--repeats", type=int, default=3)
     model.add_argument("--widths", choices=("paper", "small"), default="paper")
     model.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    model.add_argument("--system-malloc", action="store_true", help=SYSTEM_MALLOC)
     inf = sub.add_parser(
         "inference", help="ms per frame on torch eager, torch.compile and onnxruntime (CPU) or CUDA graphs (GPU)"
     )
@@ -867,6 +872,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     inf.add_argument("--fp16", action="store_true", help="graph and inputs in half precision")
     inf.add_argument("--threads", type=int, default=None, help="CPU threads of every backend (default: torch's)")
     inf.add_argument("--profile", action="store_true", help="also where the time goes, by kind of work (profilers)")
+    inf.add_argument("--system-malloc", action="store_true", help=SYSTEM_MALLOC)
     sub.add_parser("stability", help="stiff and extreme cases: worst relative error, finiteness")
     ren = sub.add_parser("render", help="rendered colour at a few sample counts against a high-sample reference")
     ren.add_argument("--seeds", type=int, nargs="+", default=[101, 200])  # training and validation scenes of mini
@@ -891,6 +897,13 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     # Off a terminal (a pipe, a log file) rich would wrap every cell at 80 columns: print tables whole.
     console = Console() if sys.stdout.isatty() else Console(width=TABLE_WIDTH)
+    caption = None
+    if args.what in ("model", "inference"):
+        # The timed networks' tensors reach 133 MB at 1080p: under glibc's default malloc each forward maps them anew
+        # and page-faults them in, which engines (and onnxruntime's arena) never do (wdss.memory).
+        if restart and not args.system_malloc:
+            restart_with_retained_memory()
+        caption = "malloc keeps freed memory (wdss.memory)" if memory_retained() else "the C library's default malloc"
     if args.what == "wavelets":
         console.print(bench_wavelets(args.shape, args.repeats, args.device, args.bases))
     elif args.what == "data":
@@ -904,7 +917,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     elif args.what == "render":
         console.print(bench_render(args.seeds, args.frame, tuple(args.size), args.samples, args.reference))
     elif args.what == "model":
-        console.print(bench_model(tuple(args.size), args.scale, args.repeats, args.device, args.widths))
+        table = bench_model(tuple(args.size), args.scale, args.repeats, args.device, args.widths)
+        table.caption = caption
+        console.print(table)
     elif args.what == "learn":
         console.print(bench_learn(args.overrides, args.steps, args.every, args.held, args.epochs))
     elif args.what == "bandlimit":
@@ -917,9 +932,10 @@ def main(argv: Sequence[str] | None = None) -> None:
             tuple(args.size), args.scale, args.repeats, args.configs, args.backends, profile=args.profile,
             device=args.device, fp16=args.fp16,
         )  # fmt: skip
+        tables[0].caption = caption
         for table in tables:
             console.print(table)
 
 
 if __name__ == "__main__":
-    main()
+    main(restart=True)

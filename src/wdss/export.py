@@ -29,12 +29,12 @@ from torch import Tensor, nn
 from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.dataset import GBUFFER_STACK, Preprocessing
 from wdss.data.sampling import lr_size, point_sample
-from wdss.model.blocks import RIRBlock
+from wdss.model.blocks import RIRBlock, fold_rir_blocks
 from wdss.model.module import SuperResolutionModule
 from wdss.model.profile import dummy_inputs
 from wdss.paths import CONF_DIR
 
-__all__ = ["ExportError", "InferenceGraph", "export", "export_onnx", "fold", "input_layout", "main"]
+__all__ = ["ExportError", "InferenceGraph", "export", "export_onnx", "input_layout", "main"]
 
 MIN_OPSET = 17
 OUTPUTS = ("color", "irradiance")
@@ -104,13 +104,6 @@ class InferenceGraph(nn.Module):
         return irradiance * inputs["brdf"], irradiance
 
 
-def fold(net: nn.Module) -> None:
-    """Fold every RIR block of ``net`` into its 3x3 convolution (same outputs)."""
-    for block in net.modules():
-        if isinstance(block, RIRBlock) and block.fused is None:
-            block.reparameterize()
-
-
 def example_inputs(graph: InferenceGraph, height: int, width: int, scale: float) -> dict[str, Tensor]:
     """Random inputs of every graph input at an ``height x width`` output and ``scale`` (positive values)."""
     inputs = dummy_inputs(graph.net, height, width, scale)
@@ -154,7 +147,7 @@ def export_onnx(
     net = module.net.eval()
     if getattr(net, "fixed_scale", False) and float(scale) != float(net.scale):
         raise ExportError(f"this {net.__class__.__name__} upsamples by {net.scale} only, not by {scale}")
-    fold(net)
+    fold_rir_blocks(net)
     graph = InferenceGraph(net).eval()
     inputs = example_inputs(graph, height, width, scale)
     with torch.no_grad():

@@ -20,6 +20,13 @@ file's name, or, with ``on_error=skip``, is reported and left out.
 
 from __future__ import annotations
 
+from wdss.memory import restart_with_retained_memory
+
+if __name__ == "__main__":
+    # A process that loops over frames keeps the memory one frame frees for the next, rather than mapping it anew and
+    # faulting it in (wdss.memory). Started again before the heavy imports below, so that this costs little.
+    restart_with_retained_memory()
+
 import hashlib
 import json
 import os
@@ -40,6 +47,7 @@ from wdss.data.exr import ExrError, read_exr, write_exr
 from wdss.data.layouts import SceneError, Sequence
 from wdss.data.preprocess import prediction_color, target_irradiance
 from wdss.model.baselines import Upsample
+from wdss.model.blocks import fold_rir_blocks
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
 from wdss.progress import Progress
@@ -88,6 +96,13 @@ def _save_png(path: Path, rgb: np.ndarray) -> None:
     os.replace(tmp, path)
 
 
+def _to(value: Any, device: torch.device) -> Any:
+    """A batch value on ``device``, an image channels-last (the network's layout)."""
+    if not isinstance(value, Tensor):
+        return value
+    return value.to(device, memory_format=torch.channels_last) if value.dim() == 4 else value.to(device)
+
+
 def _to_uint8(image: Tensor) -> np.ndarray:
     return (image[0].permute(1, 2, 0).cpu().numpy() * 255).round().astype(np.uint8)
 
@@ -132,6 +147,10 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
     read_checkpoint(ckpt)  # a wdss checkpoint whose model config builds only allowlisted callables
     device = torch.device(str(cfg.device))
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location=device, weights_only=True).eval()
+    # As engines run it (wdss.bench inference): RIR blocks folded, and channels-last: oneDNN's convolutions skip their
+    # reorders and an SWT head computes its tail on cells.
+    fold_rir_blocks(module.net)
+    module = module.to(memory_format=torch.channels_last)
     seq = Sequence(str(cfg.input), str(cfg.layout))
     scale = float(cfg.scale)
     net = module.net
@@ -212,7 +231,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
                 record.save()
                 progress.advance(text=f"frame {frame:04d} SKIPPED, it cannot be read: {err}")
                 continue
-            batch = {k: v.to(device) if isinstance(v, Tensor) else v for k, v in batch.items()}
+            batch = {k: _to(v, device) for k, v in batch.items()}
             if feed_back:
                 if (previous is None or previous[0] != frame - 1) and index and dataset.items[index - 1][1] in done:
                     fed = read_back(index - 1)
@@ -220,7 +239,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
                 history = previous[1] if previous is not None and previous[0] == frame - 1 else None
                 batch = module._with_history(batch, history)
             with torch.inference_mode():
-                out = module(batch)
+                out = module(batch, subbands=False)
             color = out.get("color")
             if color is None:
                 raise UpscaleError(f"{net.__class__.__name__} outputs a display image, no linear HDR colour to write")

@@ -9,7 +9,6 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-import wdss.model.network as network
 from wdss.export import export_onnx, run_onnx
 from wdss.model.module import SuperResolutionModule
 from wdss.model.network import WIDTHS, WDSSNet
@@ -86,19 +85,6 @@ def test_the_tail_on_cells_has_exact_gradients():
     weight = torch.randn(4, 4, 3, 3, dtype=torch.float64, requires_grad=True)
     bias = torch.randn(4, dtype=torch.float64, requires_grad=True)
     assert torch.autograd.gradcheck(lambda m, w, b: swt_tail_on_cells(m, w, b, rows), (merged, weight, bias))
-
-
-@pytest.fixture
-def tail_calls(monkeypatch) -> list:
-    """The shapes of ``merged`` each time the network computes its tail on cells."""
-    calls = []
-
-    def spy(*args):
-        calls.append(args[0].shape)
-        return swt_tail_on_cells(*args)
-
-    monkeypatch.setattr(network, "swt_tail_on_cells", spy)
-    return calls
 
 
 def tiny_swt_net() -> WDSSNet:

@@ -6,7 +6,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-__all__ = ["DoubleResidual", "GatedConv", "RIRBlock", "conv3x3", "from_log", "scale_exit", "to_log"]
+__all__ = ["DoubleResidual", "GatedConv", "RIRBlock", "conv3x3", "fold_rir_blocks", "from_log", "scale_exit", "to_log"]
 
 
 def conv3x3(cin: int, cout: int, dilation: int = 1) -> nn.Conv2d:
@@ -88,6 +88,13 @@ class RIRBlock(nn.Module):
         fused.weight.copy_(weight)
         fused.bias.copy_(reduce @ self.conv.bias + self.reduce.bias)
         self.fused = fused
+
+
+def fold_rir_blocks(net: nn.Module) -> None:
+    """Fold every RIR block of ``net`` into its 3x3 convolution, in place, for inference (the same outputs)."""
+    for block in net.modules():
+        if isinstance(block, RIRBlock) and block.fused is None:
+            block.reparameterize()
 
 
 class GatedConv(nn.Module):

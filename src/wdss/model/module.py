@@ -136,9 +136,13 @@ class SuperResolutionModule(L.LightningModule):
         """Batch keys of the test split: :attr:`inputs`, and what the temporal metrics warp and mask with."""
         return tuple(sorted(set(self.inputs) | {"motion", "gbuffer"}))
 
-    def forward(self, batch: Mapping[str, Any]) -> dict[str, Tensor | None]:
+    def forward(self, batch: Mapping[str, Any], *, subbands: bool = True) -> dict[str, Tensor | None]:
+        """The network's outputs and ``color``, the remodulated HR colour. ``subbands=False``: only the image is
+        needed (inference), which lets a network that can skip its coefficients take its faster path."""
         # Pass the batch tensors the network's forward names (inputs, and scale or brdf where it takes them).
-        wanted = {k: batch[k] for k in self._forward_args if k in batch}
+        wanted: dict[str, Any] = {k: batch[k] for k in self._forward_args if k in batch}
+        if not subbands and "subbands" in self._forward_args:
+            wanted["subbands"] = False
         out = dict(self.net(**wanted))
         # Single-image baselines return a display image (tone-mapped space) instead of irradiance.
         out["color"] = prediction_color(out.get("irradiance"), batch)
