@@ -105,6 +105,15 @@ def test_inference_in_half_precision_stays_close_to_float32(capsys):
         assert 0 < float(rows["SWT-db4", backend][-1]) <= 1e-2  # half precision: close to float32, not equal
 
 
+def test_inference_in_bfloat16_runs_the_torch_backends_close_to_float32(capsys):
+    argv = ["inference", "--size", "16", "32", "--repeats", "1", "--configs", "SWT-db4", "--threads", "1"]
+    bench.main([*argv, "--backends", "eager", "--bf16"])
+    out = capsys.readouterr().out
+    assert "bf16" in out and 0 < float(table_rows(out)["SWT-db4", "eager"][-1]) <= 2e-2  # 8 bits of mantissa
+    with pytest.raises(ValueError, match="onnxruntime's CPU provider has no bfloat16 convolutions"):
+        bench.bench_inference((16, 32), 2.0, 1, ["none"], ["onnxruntime"], dtype=torch.bfloat16)
+
+
 def test_inference_refuses_backends_its_device_cannot_run():
     with pytest.raises(ValueError, match="cudagraphs backend records CUDA graphs: it needs --device cuda"):
         bench.bench_inference((16, 32), 2.0, 1, ["none"], ["eager", "cudagraphs"])

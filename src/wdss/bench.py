@@ -7,6 +7,7 @@ targets: timing on shared machines is noisy, so comparisons are only made within
 from __future__ import annotations
 
 import argparse
+import copy
 import math
 import statistics
 import sys
@@ -389,7 +390,9 @@ def ort_session(path: str, profile: bool = False):
     return onnxruntime.InferenceSession(path, options, providers=["CPUExecutionProvider"])
 
 
-def _check_backends(backends: Sequence[str], device: str, profile: bool) -> None:
+def _check_backends(backends: Sequence[str], device: str, profile: bool, dtype: torch.dtype) -> None:
+    if dtype == torch.bfloat16 and "onnxruntime" in backends:
+        raise ValueError("onnxruntime's CPU provider has no bfloat16 convolutions: time bfloat16 on the torch backends")
     if profile and device != "cpu":
         raise ValueError("--profile reads CPU profilers: time a GPU without it")
     if device == "cpu" and "cudagraphs" in backends:
@@ -411,19 +414,24 @@ def _inference_runners(
     backends: Sequence[str],
     tmp: str,
     device: str = "cpu",
-    fp16: bool = False,
+    dtype: torch.dtype = torch.float32,
 ) -> tuple[dict[str, Callable[[], object]], dict[str, float], dict]:
     """A zero-argument callable per backend, all on the same example inputs and weights, each one's
     max |difference| / max against float32 eager's colour, and the inputs as onnxruntime's feed (the graph is in
-    ``tmp``). ``fp16`` runs the graph and its inputs in half precision, as the fp16 export does."""
+    ``tmp``). ``dtype`` float16 or bfloat16 runs the graph and its inputs in that precision (the ONNX graph in float16
+    as the fp16 export writes it; onnxruntime's CPU provider has no bfloat16 convolutions)."""
     from wdss.export import export_onnx, relative_error
     from wdss.model.module import SuperResolutionModule
 
     # The export folds RIR blocks in place and returns the graph every backend runs: network + remodulation.
     graph, inputs, reference = export_onnx(
-        SuperResolutionModule(net), f"{tmp}/model.onnx", height=height, width=width, scale=scale, fp16=fp16
-    )
+        SuperResolutionModule(net), f"{tmp}/model.onnx", height=height, width=width, scale=scale,
+        fp16=dtype == torch.float16,
+    )  # fmt: skip
     feed = {k: v.numpy() for k, v in inputs.items()}
+    if dtype == torch.bfloat16:  # a copy in bfloat16, as the fp16 export makes one in float16
+        graph = copy.deepcopy(graph).to(dtype)
+        inputs = {k: v.to(dtype) for k, v in inputs.items()}
     # torch runs the graph channels-last, the layout engines feed: oneDNN's convolutions then skip their reorders
     # (eager none at 1080p 2x: 5162 vs 6864 ms), and the SWT head computes its tail on cells (wdss.model.polyphase).
     graph = graph.to(device, memory_format=torch.channels_last)
@@ -519,13 +527,13 @@ def bench_inference(
     warmup: int = 1,
     profile: bool = False,
     device: str = "cpu",
-    fp16: bool = False,
+    dtype: torch.dtype = torch.float32,
 ) -> list[Table]:
     """Milliseconds per output frame of every configuration on every backend (paper widths), as an engine
     runs it: the exported graph (network + remodulation, RIR blocks folded), batch of 1, inference mode; torch runs
     it channels-last, and torch.compile freezes the weights (``freezing``), as compiled inference does. ``backends``
-    default to :data:`BACKENDS` on the CPU and :data:`GPU_BACKENDS` on a GPU (``device="cuda"``); ``fp16`` runs graph
-    and inputs in half precision.
+    default to :data:`BACKENDS` on the CPU and :data:`GPU_BACKENDS` on a GPU (``device="cuda"``), without onnxruntime in
+    bfloat16; ``dtype`` (float16, bfloat16) runs graph and inputs in reduced precision.
 
     All (configuration, backend) pairs are built first, then timed in the same interleaved rounds
     (:func:`interleaved_ms`); ratios are medians of the per-round ratios (paired), times medians of the rounds.
@@ -537,15 +545,18 @@ def bench_inference(
 
     from wdss.model.network import WDSSNet
 
-    backends = backends or (BACKENDS if device == "cpu" else GPU_BACKENDS)
-    _check_backends(backends, device, profile)
+    if not backends:
+        backends = BACKENDS if device == "cpu" else GPU_BACKENDS
+        if dtype == torch.bfloat16:
+            backends = tuple(b for b in backends if b != "onnxruntime")
+    _check_backends(backends, device, profile, dtype)
     height, width = size
     with tempfile.TemporaryDirectory() as tmp:
         built = {}
         for name in configs:
             torch.manual_seed(0)  # the same weights on every run: a rerun times the same networks
             net = WDSSNet(**INFERENCE_CONFIGS[name]).eval()
-            built[name] = _inference_runners(net, height, width, scale, backends, f"{tmp}/{name}", device, fp16)
+            built[name] = _inference_runners(net, height, width, scale, backends, f"{tmp}/{name}", device, dtype)
         runners = {(name, backend): built[name][0][backend] for name in configs for backend in backends}
         with torch.inference_mode():
             times = interleaved_ms(runners, repeats, warmup)
@@ -559,7 +570,7 @@ def bench_inference(
                     spent[name, backend] = profile_buckets(run, backend, session)
 
     where_run = f"CPU, {torch.get_num_threads()} threads" if device == "cpu" else torch.cuda.get_device_name(device)
-    precision = ", fp16" if fp16 else ""
+    precision = {torch.float16: ", fp16", torch.bfloat16: ", bf16"}.get(dtype, "")
     table = Table(title=f"ms per {width}x{height} frame at {scale:g}x, {where_run}{precision}, {repeats} rounds")
     for column in ("model", "backend", "ms / frame", "time / eager", "time / none", "max rel. error"):
         table.add_column(column, justify="left" if column in ("model", "backend") else "right")
@@ -869,7 +880,11 @@ def main(argv: Sequence[str] | None = None, *, restart: bool = False) -> None:
         help=f"default: {' '.join(BACKENDS)} on the CPU, {' '.join(GPU_BACKENDS)} on a GPU",
     )  # fmt: skip
     inf.add_argument("--device", default="cpu", help="cpu, or cuda (a GPU: eager, compile and CUDA graphs)")
-    inf.add_argument("--fp16", action="store_true", help="graph and inputs in half precision")
+    reduced = inf.add_mutually_exclusive_group()
+    reduced.add_argument("--fp16", action="store_true", help="graph and inputs in half precision")
+    reduced.add_argument(
+        "--bf16", action="store_true", help="graph and inputs in bfloat16 (torch backends; CPUs with AVX512-BF16, AMX)"
+    )
     inf.add_argument("--threads", type=int, default=None, help="CPU threads of every backend (default: torch's)")
     inf.add_argument("--profile", action="store_true", help="also where the time goes, by kind of work (profilers)")
     inf.add_argument("--system-malloc", action="store_true", help=SYSTEM_MALLOC)
@@ -930,7 +945,7 @@ def main(argv: Sequence[str] | None = None, *, restart: bool = False) -> None:
             torch.set_num_threads(args.threads)
         tables = bench_inference(
             tuple(args.size), args.scale, args.repeats, args.configs, args.backends, profile=args.profile,
-            device=args.device, fp16=args.fp16,
+            device=args.device, dtype=torch.float16 if args.fp16 else torch.bfloat16 if args.bf16 else torch.float32,
         )  # fmt: skip
         tables[0].caption = caption
         for table in tables:
