@@ -28,6 +28,7 @@ def test_tables_print_whole_off_a_terminal(monkeypatch, capsys):
         table.add_column(column)
     table.add_row("swt", "db4", "shared_inr", "0.575 M", "135.7", "0.33%", "3512", "1.135", "1.092")
     monkeypatch.setattr(bench, "bench_model", lambda *args: table)
+    monkeypatch.setattr(bench, "memory_retained", lambda: False)
     bench.main(["model"])
     out = capsys.readouterr().out
     assert table_rows(out)["swt", "db4"] == ["shared_inr", "0.575 M", "135.7", "0.33%", "3512", "1.135", "1.092"]

@@ -14,10 +14,11 @@ from wdss import memory
 
 # A command line that starts itself again: the tunables are read only when a process starts.
 FAULTS = """
-import json, resource, sys, torch
+import json, resource, sys
 from wdss.memory import memory_retained, restart_with_retained_memory
 
 restart_with_retained_memory()
+import torch
 
 def faults():  # page faults of allocating 64 MB (above glibc's largest mmap threshold), writing it whole, freeing it
     before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
@@ -30,7 +31,10 @@ print(json.dumps([memory_retained(), sys.argv[1:], [faults() for _ in range(6)]]
 
 def run_faults(**env: str) -> list:
     """Whether the command ran under the tunables, its arguments, and the page faults of each allocation."""
-    environ = {k: v for k, v in os.environ.items() if k not in ("GLIBC_TUNABLES", memory.RESTARTED)}
+    # Nothing else that changes how memory is allocated: a preloaded allocator, malloc's own variables, torch's huge
+    # pages.
+    mallocs = ("GLIBC_TUNABLES", memory.RESTARTED, "LD_PRELOAD", "THP_MEM_ALLOC_ENABLE")
+    environ = {k: v for k, v in os.environ.items() if k not in mallocs and not k.startswith("MALLOC_")}
     command = [sys.executable, "-c", FAULTS, "an", "argument"]
     out = subprocess.run(command, capture_output=True, text=True, check=True, env={**environ, **env}).stdout
     return json.loads(out)
@@ -75,8 +79,19 @@ def test_nothing_starts_again_where_it_cannot_or_need_not(monkeypatch):
     monkeypatch.setattr(memory, "_glibc", lambda: False)  # macOS, Windows, musl
     memory.restart_with_retained_memory()
     monkeypatch.setattr(memory, "_glibc", lambda: True)
+    monkeypatch.delenv("GLIBC_TUNABLES", raising=False)
+    monkeypatch.delenv(memory.RESTARTED, raising=False)
+    monkeypatch.setenv("LD_PRELOAD", "/usr/lib/x86_64-linux-gnu/libjemalloc.so.2")  # an allocator of its own
+    memory.restart_with_retained_memory()
+    monkeypatch.delenv("LD_PRELOAD")
+    monkeypatch.setattr(sys, "argv", ["-"])  # a program read from standard input: consumed by now
+    memory.restart_with_retained_memory()
+    monkeypatch.setattr(sys, "argv", ["upscale.py"])
     monkeypatch.setenv(memory.RESTARTED, "1")  # started again once already: glibc ignored the tunables
     memory.restart_with_retained_memory()
     monkeypatch.delenv(memory.RESTARTED)
     monkeypatch.setenv("GLIBC_TUNABLES", memory.retained_memory_environment({})["GLIBC_TUNABLES"])
     memory.restart_with_retained_memory()  # already in effect
+    monkeypatch.delenv("GLIBC_TUNABLES")
+    with pytest.raises(AssertionError, match="started again"):  # and otherwise it does
+        memory.restart_with_retained_memory()

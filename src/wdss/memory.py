@@ -7,13 +7,15 @@ anew and the kernel faults in and zeroes each 4 KiB page on first touch. Measure
 2.8-3.8 s; with the memory kept it faulted none after the first frame and took 1.4-1.6 s, resident memory steady
 at 2.8 GB over 12 forwards. Engines, onnxruntime's arena and PyTorch's CUDA allocator all keep the memory they free.
 
-glibc is told so by its tunables, which it reads only when a process starts (:data:`TUNABLES`): no block from
-``mmap``, the heap never trimmed, and no per-thread cache or fast bins. The last two matter: the few bytes
-``posix_memalign`` (PyTorch's CPU allocator) splits off a block sit in those caches as if in use, so the freed
-block cannot merge with its neighbours and the next one of the same size grows the heap instead (measured: 64 MB
-more each time, without end). mallopt could set the first two at run time, not the caches; hence an entry point
-starts itself again under the tunables (:func:`restart_with_retained_memory`). PyTorch's CPU tuning guide
-recommends preloading jemalloc or tcmalloc for the same reason; this needs neither.
+glibc is told so by its tunables, which it reads only when a process starts (:data:`TUNABLES`, glibc 2.26 on): no
+block from ``mmap``, the heap never trimmed, and no per-thread cache or fast bins. The last two matter: the few
+bytes ``posix_memalign`` (PyTorch's CPU allocator) splits off a block sit in those caches as if in use, so the
+freed block cannot merge with its neighbours and the next one of the same size grows the heap instead (measured:
+64 MB more each time, without end). ``mallopt`` can set all but the per-thread cache at run time; hence an entry
+point starts itself again under the tunables (:func:`restart_with_retained_memory`), whose values replace a user's
+own for the same four and are inherited by the processes it starts (torch.compile's workers among them).
+PyTorch's CPU tuning guide recommends preloading jemalloc or tcmalloc for the same reason; this needs neither, and
+leaves a process that preloads an allocator of its own as it is.
 """
 
 from __future__ import annotations
@@ -34,12 +36,21 @@ RESTARTED = "WDSS_RETAINED_MEMORY"  # set in the restarted process: never restar
 
 
 def _glibc() -> bool:
+    """Whether this process's C library is glibc 2.26 or later (the first with these tunables)."""
     if not sys.platform.startswith("linux"):
         return False
     try:
-        return hasattr(ctypes.CDLL(None), "gnu_get_libc_version")  # musl has no such function
-    except OSError:
+        version = ctypes.CDLL(None).gnu_get_libc_version  # musl has no such function
+    except (OSError, AttributeError):
         return False
+    version.restype = ctypes.c_char_p
+    major, minor = (int(part) for part in version().decode().split(".")[:2])
+    return (major, minor) >= (2, 26)
+
+
+def _preloads_allocator(environ) -> bool:
+    """Whether an allocator of its own (jemalloc, tcmalloc, mimalloc) is preloaded: glibc's tunables do not reach it."""
+    return "malloc" in environ.get("LD_PRELOAD", "")
 
 
 def _tunables(value: str) -> dict[str, str]:
@@ -47,15 +58,16 @@ def _tunables(value: str) -> dict[str, str]:
 
 
 def memory_retained(environ: dict | None = None) -> bool:
-    """Whether this process (or one started with ``environ``) runs under :data:`TUNABLES`."""
+    """Whether this process (or one started with ``environ``) was started with ``GLIBC_TUNABLES`` holding
+    :data:`TUNABLES`, on a glibc that reads them and no allocator of its own preloaded."""
     environ = os.environ if environ is None else environ
     set_ = _tunables(environ.get("GLIBC_TUNABLES", ""))
-    return _glibc() and all(set_.get(k) == v for k, v in TUNABLES.items())
+    return _glibc() and not _preloads_allocator(environ) and all(set_.get(k) == v for k, v in TUNABLES.items())
 
 
 def retained_memory_environment(environ: dict | None = None) -> dict[str, str]:
-    """``environ`` (default: this process's) with :data:`TUNABLES` added to its ``GLIBC_TUNABLES``, whose other
-    tunables are kept."""
+    """``environ`` (default: this process's) with :data:`TUNABLES` added to its ``GLIBC_TUNABLES``: its other tunables
+    are kept, its own values of these four replaced."""
     env = dict(os.environ if environ is None else environ)
     merged = {**_tunables(env.get("GLIBC_TUNABLES", "")), **TUNABLES}
     env["GLIBC_TUNABLES"] = ":".join(f"{k}={v}" for k, v in merged.items())
@@ -67,9 +79,13 @@ def restart_with_retained_memory() -> None:
 
     For a command-line entry point that loops over frames, called before it does anything else. Returns, leaving
     everything as it is, when the tunables are already in effect, where the C library is not glibc (macOS,
-    Windows, musl), or in a process this already restarted (glibc ignored them there).
+    Windows, musl, glibc before 2.26), with an allocator of its own preloaded, in a process this already restarted
+    (glibc ignored them there), and where the command line cannot be run again: a program read from standard input
+    (``python -``, consumed by now), or an embedded interpreter without ``sys.executable``.
     """
-    if memory_retained() or os.environ.get(RESTARTED) or not _glibc():
+    if memory_retained() or os.environ.get(RESTARTED) or not _glibc() or _preloads_allocator(os.environ):
+        return
+    if not sys.executable or not sys.orig_argv or sys.argv[0] in ("", "-"):
         return
     env = retained_memory_environment()
     env[RESTARTED] = "1"
