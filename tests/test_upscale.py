@@ -128,9 +128,14 @@ def test_python_m_wdss_upscale_writes_a_side_by_side_video(tmp_path):
     assert len(frames) == 5 and frames[0].shape[1] == 2 * 96  # baseline | prediction
 
 
-@pytest.mark.parametrize("overrides", [("transform=swt", "basis=haar"), ("variant=dfasr",)])
+@pytest.mark.parametrize(
+    "overrides",
+    [("transform=swt", "basis=haar"), ("variant=dfasr",), ("experiment=cpu", "transform=swt", "recipe.exit_init=1.0")],
+)
 def test_upscale_in_bfloat16_stays_close_to_float32_and_keeps_its_own_folder(tmp_path, overrides):
-    """The network in bfloat16 (a recurrent one feeds its bfloat16 output back), metrics and files in float32."""
+    """The network under bfloat16 autocast (a recurrent one fed its own output back; the default CPU recipe with its
+    learned kernel, which computes in float32; its exit initialised, so that the network adds to the kernel from the
+    start), metrics and files in float32."""
     ckpt = tiny_checkpoint(tmp_path / "model.ckpt", *overrides)
     args = (f"ckpt_path={ckpt}", f"input={FIXTURE}")
     upscale(compose_upscale(tmp_path, *args, f"output={tmp_path / 'fp32'}"))

@@ -28,7 +28,6 @@ if __name__ == "__main__":
     restart_with_retained_memory()
 
 import hashlib
-import inspect
 import json
 import os
 import re
@@ -57,9 +56,10 @@ from wdss.video import Mp4Writer, labelled
 __all__ = ["UpscaleError", "main", "output_name", "upscale"]
 
 RECORD = "upscale.json"
-# The network's weights and inputs (metrics, PNG and EXR stay float32). In bfloat16 the network runs ~1.7x faster on
-# CPUs with AVX512-BF16 or AMX, ~1e-2 of the frame's maximum off float32 (wdss.bench inference --bf16); float16 suits
-# GPUs.
+# The network's precision, by autocast: its convolutions and matrix products in bfloat16 or float16, what needs
+# float32 (the wavelet synthesis, the learned kernel's softmax) in float32, as are the metrics and files. In bfloat16
+# the network runs ~1.7x faster on CPUs with AVX512-BF16 or AMX, ~1e-2 of the frame's maximum off float32; float16
+# suits GPUs.
 PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16, "float16": torch.float16}
 SHOWN = ("psnr", "ssim", "flip")  # printed per frame (every metric is recorded)
 _READ_ERRORS = (SceneError, ExrError, OSError)
@@ -106,13 +106,6 @@ def _to(value: Any, device: torch.device) -> Any:
     if not isinstance(value, Tensor):
         return value
     return value.to(device, memory_format=torch.channels_last) if value.dim() == 4 else value.to(device)
-
-
-def _cast(batch: dict[str, Any], keys: set[str], dtype: torch.dtype) -> dict[str, Any]:
-    """The batch with the network's floating-point images (``keys``) in ``dtype``; the rest as they are: the BRDF
-    factor and emission the prediction is remodulated with, and the scale (1.33 is 1.328 in bfloat16)."""
-    cast = {k for k in keys if k != "scale" and isinstance(batch.get(k), Tensor) and batch[k].is_floating_point()}
-    return {k: v.to(dtype) if k in cast else v for k, v in batch.items()}
 
 
 def _to_uint8(image: Tensor) -> np.ndarray:
@@ -167,8 +160,6 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
     # reorders and an SWT head computes its tail on cells.
     fold_rir_blocks(module.net)
     module = module.to(memory_format=torch.channels_last)
-    module.net.to(dtype)  # the network only: the module's metrics stay float32
-    net_args = set(inspect.signature(module.net.forward).parameters)
     seq = Sequence(str(cfg.input), str(cfg.layout))
     scale = float(cfg.scale)
     net = module.net
@@ -262,8 +253,8 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
                     previous = (frame - 1, fed) if fed is not None else None
                 history = previous[1] if previous is not None and previous[0] == frame - 1 else None
                 batch = module._with_history(batch, history)
-            with torch.inference_mode():
-                out = module(_cast(batch, net_args, dtype), subbands=False)
+            with torch.inference_mode(), torch.autocast(device.type, dtype, enabled=dtype != torch.float32):
+                out = module(batch, subbands=False)
             color = out.get("color")
             if color is None:
                 raise UpscaleError(f"{net.__class__.__name__} outputs a display image, no linear HDR colour to write")

@@ -426,10 +426,11 @@ class WDSSNet(nn.Module):
         ):
             # Without the subbands, on channels-last cells and in exported graphs, the tail runs on the half-resolution
             # cells (wdss.model.polyphase), which is faster there. Synthesis undoes analysis, so a residual base is
-            # added to the image, not to the subbands.
-            image = swt_tail_on_cells(
-                merged.float(), self.exit.weight.float(), self.exit.bias.float(), self.wavelet.filter_rows.float()
-            )
+            # added to the image, not to the subbands. float32 under mixed precision, as the direct synthesis below.
+            with torch.autocast(merged.device.type, enabled=False):
+                image = swt_tail_on_cells(
+                    merged.float(), self.exit.weight.float(), self.exit.bias.float(), self.wavelet.filter_rows.float()
+                )
             if base is not None:
                 image = image + base
             coefficients = None
