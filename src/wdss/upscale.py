@@ -1,5 +1,5 @@
 """Upscale entry point: ``python -m wdss.upscale ckpt_path=PATH input=SEQUENCE scale=2 [output=DIR]
-[frames=[start,stop]] [compare=true] [on_error=skip]``.
+[frames=[start,stop]] [compare=true] [on_error=skip] [precision=bfloat16]``.
 
 Runs a trained model on a sequence of one's own frames, in any layout wdss reads, reading only the buffers the
 model needs (the LR colour from a native folder that matches the scale, else point-sampled from the HR frame),
