@@ -57,12 +57,16 @@ def _tunables(value: str) -> dict[str, str]:
     return dict(item.split("=", 1) for item in value.split(":") if "=" in item)
 
 
+def _holds_tunables(environ) -> bool:
+    held = _tunables(environ.get("GLIBC_TUNABLES", ""))
+    return all(held.get(k) == v for k, v in TUNABLES.items())
+
+
 def memory_retained(environ: dict | None = None) -> bool:
     """Whether this process (or one started with ``environ``) was started with ``GLIBC_TUNABLES`` holding
     :data:`TUNABLES`, on a glibc that reads them and no allocator of its own preloaded."""
     environ = os.environ if environ is None else environ
-    set_ = _tunables(environ.get("GLIBC_TUNABLES", ""))
-    return _glibc() and not _preloads_allocator(environ) and all(set_.get(k) == v for k, v in TUNABLES.items())
+    return _glibc() and not _preloads_allocator(environ) and _holds_tunables(environ)
 
 
 def retained_memory_environment(environ: dict | None = None) -> dict[str, str]:
@@ -83,7 +87,7 @@ def restart_with_retained_memory() -> None:
     (glibc ignored them there), and where the command line cannot be run again: a program read from standard input
     (``python -``, consumed by now), or an embedded interpreter without ``sys.executable``.
     """
-    if memory_retained() or os.environ.get(RESTARTED) or not _glibc() or _preloads_allocator(os.environ):
+    if os.environ.get(RESTARTED) or _holds_tunables(os.environ) or _preloads_allocator(os.environ) or not _glibc():
         return
     if not sys.executable or not sys.orig_argv or sys.argv[0] in ("", "-"):
         return
