@@ -28,6 +28,7 @@ from torch import Tensor, nn
 
 from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.dataset import GBUFFER_STACK, Preprocessing
+from wdss.data.preprocess import LR_GUIDE
 from wdss.data.sampling import lr_size, point_sample
 from wdss.model.blocks import RIRBlock, fold_rir_blocks
 from wdss.model.module import SuperResolutionModule
@@ -60,6 +61,11 @@ CHANNELS: dict[str, tuple[str, list[str], str]] = {
     ),
     "lr_color": ("low", list(_RGB), "LR colour"),
     "lr_brdf": ("low", list(_RGB), "LR BRDF factor"),
+    "lr_guide": (
+        "low",
+        [c for b in LR_GUIDE for c in _channels(b)],
+        "the G-buffer the LR colour was shaded with (the LR frame's own; preprocessed as the HR stack's channels)",
+    ),
     "brdf": ("high", list(_RGB), "HR BRDF factor F (1 where F < 1e-4): color = irradiance * brdf"),
     "gbuffer": ("high", [c for b in GBUFFER_STACK for c in _channels(b)], "HR G-buffer stack"),
     "spatial_mask": ("high", ["mask"], "1 where the HR G-buffer differs from the bilinearly upsampled LR one"),

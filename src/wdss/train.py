@@ -55,11 +55,15 @@ def _check_numbers(cfg: DictConfig) -> None:
             raise ConfigError(f"{key} must be an integer >= {least}, got {value!r}")
     for key in ("scale.train", "data.val_scale"):
         value = OmegaConf.select(cfg, key)
+        choices = OmegaConf.is_dict(value)
+        if choices and (set(value) != {"choices"} or not OmegaConf.is_list(value.choices) or not value.choices):
+            raise ConfigError(f"{key} as a mapping is {{choices: [s1, s2, ...]}}, got {OmegaConf.to_container(value)}")
+        value = value.choices if choices else value
         values = list(value) if OmegaConf.is_list(value) else [value]
         for number in values:
             if isinstance(number, bool) or not isinstance(number, int | float) or not 1.0 <= number <= 8.0:
                 raise ConfigError(f"{key} must lie in [1, 8], got {number!r}")
-        if values != sorted(values):
+        if not choices and values != sorted(values):
             raise ConfigError(f"{key} takes [low, high] with low <= high, got {values}")
 
 
@@ -83,6 +87,8 @@ def validate(cfg: DictConfig) -> None:
         raise ConfigError(f"scale=fixed takes one number, got the list {list(scale)}: use scale=arbitrary for ranges")
     if scale_name == "arbitrary" and not (OmegaConf.is_list(scale) and len(scale) == 2):
         raise ConfigError(f"scale=arbitrary takes [low, high], got {scale}: use scale=fixed for one scale")
+    if scale_name == "native" and not OmegaConf.is_dict(scale):
+        raise ConfigError(f"scale=native takes {{choices: [...]}}, got {scale}: use scale=arbitrary for ranges")
     for value in OmegaConf.to_container(cfg.data, resolve=True).get("test_scales", []):
         if not 1.0 <= float(value) <= 8.0:
             raise ConfigError(f"data.test_scales must lie in [1, 8], got {value}")

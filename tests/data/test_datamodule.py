@@ -216,7 +216,7 @@ def test_native_lr_of_the_wrong_width_is_a_clear_error(tmp_path):
 
     write_exr(seq_dir / "4P" / "PretonemapMetallic.0001.exr", {c: torch.zeros(4, 5).numpy() for c in "RGBA"})
     dataset = FrameDataset([Sequence(seq_dir)], ["lr_color", "target"], scale=2.0)
-    with pytest.raises(SceneError, match=r"frame 1: the 4P frame is 5x4, but 8x8 at scale 2.0 needs 4x4"):
+    with pytest.raises(SceneError, match=r"frame 1: the 4P frame is 5x4, but 8x8 at scale 2 needs 4x4"):
         dataset[0]
 
 

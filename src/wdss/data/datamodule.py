@@ -11,6 +11,9 @@ key                shape                        meaning
                                                 colour when ``preprocessing.demodulate`` is false)
 ``lr_color``       (N, 3, h, w)                 low-resolution colour (for image-space baselines)
 ``lr_brdf``        (N, 3, h, w)                 low-resolution BRDF factor
+``lr_guide``       (N, 7, h, w)                 the G-buffer the LR colour was shaded with: albedo 3, depth 1,
+                                                normal 3 (a native LR folder's own, else the HR one point-sampled
+                                                at the LR pixels: ``wdss.data.preprocess.lr_guide``)
 ``gbuffer``        (N, 11, H, W)                base colour 3, depth 1, normal 3, specular, roughness, NoV,
                                                 metallic (``wdss.data.dataset.GBUFFER_STACK``)
 ``spatial_mask``   (N, 1, H, W)                 1 where HR and upsampled LR G-buffers disagree
@@ -56,7 +59,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from wdss.data.cache import FrameCache
-from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing, requirements
+from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing, ScaleSpec, parse_scale, requirements
 from wdss.data.layouts import OPTIONAL_BUFFERS, SceneError, Sequence, discover_sequences
 from wdss.data.packed import PackedSequence, discover_packed, is_packed
 from wdss.data.preprocess import RawBatch
@@ -104,8 +107,10 @@ class SceneDataModule(L.LightningDataModule):
 
     ``inputs`` are the batch keys the model consumes (the model config declares them); ``test_inputs`` those of
     the test split, when it needs more (the temporal metrics: motion and G-buffer). ``scale`` is a fixed
-    training scale or a ``[low, high]`` range sampled per batch; validation runs full frames at
-    ``val_scale`` and testing at every scale of ``test_scales`` (one dataloader each). ``patches_per_frame``
+    training scale, a ``[low, high]`` range or a ``{choices: [...]}`` set drawn from per batch; validation runs
+    full frames at ``val_scale`` and testing at every scale of ``test_scales`` (one dataloader each).
+    ``lr_source`` is the LR sampling convention read: ``auto`` (a native ``<H>P`` folder where one matches the
+    scale, else the HR frame point-sampled), ``native`` (required) or ``point`` (always point-sampled). ``patches_per_frame``
     random patches of every training frame make one epoch. ``prepare`` is called
     with ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset).
     """
@@ -117,7 +122,7 @@ class SceneDataModule(L.LightningDataModule):
         inputs: Iterable[str],
         *,
         layout: str = "auto",
-        scale: float | Iterable[float] = 2.0,
+        scale: float | Iterable[float] | Mapping[str, Any] = 2.0,
         val_scale: float | None = None,
         test_scales: Iterable[float] = (2.0, 3.0, 4.0),
         patch_size: int | None = 96,
@@ -137,6 +142,7 @@ class SceneDataModule(L.LightningDataModule):
         packed_root: str | Path | None = None,
         preprocess_on: str = "auto",
         cache_mb: int = 1024,
+        lr_source: str = "auto",
     ) -> None:
         super().__init__()
         if format not in FORMATS:
@@ -154,9 +160,8 @@ class SceneDataModule(L.LightningDataModule):
         self.inputs = tuple(inputs)
         self.test_inputs = self.inputs if test_inputs is None else tuple(test_inputs)
         self.layout = layout
-        self.scale = tuple(float(s) for s in scale) if isinstance(scale, Iterable) else float(scale)
-        if isinstance(self.scale, tuple) and len(self.scale) != 2:
-            raise ValueError(f"data.scale is a number or [low, high], got {list(self.scale)}")
+        self.scale = parse_scale(scale)
+        self.lr_source = lr_source
         self.val_scale = float(val_scale) if val_scale is not None else self._middle(self.scale)
         self.test_scales = tuple(float(s) for s in test_scales)
         self.patch_size = patch_size
@@ -181,7 +186,10 @@ class SceneDataModule(L.LightningDataModule):
         self.datasets: dict[str, Any] = {}
 
     @staticmethod
-    def _middle(scale: float | tuple[float, float]) -> float:
+    def _middle(scale: ScaleSpec) -> float:
+        if isinstance(scale, dict):  # the middle choice: a scale the data has natively
+            choices = sorted(scale["choices"])
+            return choices[len(choices) // 2]
         return float(scale) if not isinstance(scale, tuple) else round(sum(scale) / 2, 3)
 
     def prepare_data(self) -> None:
@@ -247,7 +255,7 @@ class SceneDataModule(L.LightningDataModule):
                 log.warning("data.format=auto: reading %s from EXR files, not its packed copy: %s", name, why)
         return discover_sequences(self.root, [name], self.layout)[0]
 
-    def _dataset(self, split: str, scale: float | tuple[float, float], patch: int | None) -> FrameDataset:
+    def _dataset(self, split: str, scale: ScaleSpec, patch: int | None) -> FrameDataset:
         keys = self.test_inputs if split == "test" else self.inputs
         sequences, ranges = self._sequences(split, keys)
         return FrameDataset(
@@ -261,6 +269,7 @@ class SceneDataModule(L.LightningDataModule):
             frame_ranges=ranges,
             sequence_length=self.sequence_length if split == "train" else 1,
             seed=self.seed,
+            lr_source=self.lr_source,
         )
 
     def setup(self, stage: str | None = None) -> None:
@@ -284,6 +293,8 @@ class SceneDataModule(L.LightningDataModule):
             repeats=self.patches_per_frame if train else 1,
             rank=rank,
             world_size=world_size,
+            scale=dataset.scale,
+            batch_size=batch_size,
         )
         return DataLoader(
             dataset,

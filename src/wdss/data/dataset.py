@@ -13,8 +13,9 @@ The batch keys are documented in :mod:`wdss.data.datamodule`.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from collections.abc import Sequence as Seq
+from typing import Any
 
 import numpy as np
 import torch
@@ -23,11 +24,12 @@ from torch import Tensor
 from torch.utils.data import Dataset, Sampler
 
 from wdss.data.layouts import BUFFERS, SceneError, Sequence
-from wdss.data.preprocess import GBUFFER_STACK, Preprocessing, RawBatch, brdf_of, build_batch
+from wdss.data.preprocess import GBUFFER_STACK, LR_GUIDE, Preprocessing, RawBatch, brdf_of, build_batch
 from wdss.data.sampling import flip, lr_size, scale_matches
 
 __all__ = [
     "BATCH_KEYS",
+    "LR_SOURCES",
     "GBUFFER_STACK",
     "Collate",
     "EpochSampler",
@@ -35,6 +37,8 @@ __all__ = [
     "Preprocessing",
     "brdf_of",
     "build_batch",
+    "draw_scale",
+    "parse_scale",
     "requirements",
 ]
 
@@ -46,6 +50,7 @@ BATCH_KEYS = (
     "lr",
     "lr_color",
     "lr_brdf",
+    "lr_guide",
     "gbuffer",
     "spatial_mask",
     "history",
@@ -62,6 +67,37 @@ _WARPED = {"history", "temporal_mask", "history2"}  # keys that warp previous fr
 ROLES = ("hr", "lr", "prev", "prev_lr", "prev2")
 _OFFSET = {"hr": 0, "lr": 0, "prev": 1, "prev_lr": 1, "prev2": 2}  # frames back from the sample's frame
 _HR_OF = {"lr": "hr", "prev_lr": "prev"}  # a low-resolution role and the high-resolution frame it samples
+
+
+LR_SOURCES = ("auto", "native", "point")
+ScaleSpec = float | tuple[float, float] | dict
+
+
+def parse_scale(scale: Any, key: str = "data.scale") -> ScaleSpec:
+    """A training scale: a number (fixed), ``[low, high]`` (drawn uniformly per batch) or ``{choices: [2, 3, 4]}``
+    (one of them per batch: the scales a dataset rendered natively, so that every batch reads native LR frames)."""
+    if isinstance(scale, Mapping):
+        if set(scale) != {"choices"} or not scale["choices"]:
+            raise ValueError(f"{key} as a mapping is {{choices: [s1, s2, ...]}}, got {dict(scale)}")
+        return {"choices": tuple(float(s) for s in scale["choices"])}
+    if isinstance(scale, Iterable) and not isinstance(scale, str):
+        values = tuple(float(s) for s in scale)
+        if len(values) != 2:
+            raise ValueError(f"{key} is a number, [low, high] or {{choices: [...]}}, got {list(values)}")
+        return values
+    return float(scale)
+
+
+def draw_scale(scale: ScaleSpec, seed: int | None = None) -> float:
+    """One batch's scale under ``scale`` (:func:`parse_scale`), from ``seed`` when given."""
+    rng = torch.Generator().manual_seed(seed) if seed is not None else None
+    if isinstance(scale, dict):
+        choices = scale["choices"]
+        return float(choices[int(torch.randint(len(choices), (), generator=rng))])
+    if isinstance(scale, tuple):
+        low, high = scale
+        return float(low + (high - low) * torch.rand((), generator=rng).item())
+    return float(scale)
 
 
 def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]]:
@@ -87,6 +123,8 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
         need["lr"] |= {"color"}
     if "lr_brdf" in keys:
         need["lr"] |= brdf
+    if "lr_guide" in keys:
+        need["lr"] |= set(LR_GUIDE)
     if "gbuffer" in keys:
         need["hr"] |= set(GBUFFER_STACK)
     if "spatial_mask" in keys:
@@ -116,7 +154,13 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
 class FrameDataset(Dataset):
     """Samples of one split: every frame of every sequence (that has history, where history is needed).
 
-    ``scale``: a number (fixed scale) or a ``(low, high)`` range sampled per batch by :class:`Collate`.
+    ``scale``: a number (fixed scale), or a ``(low, high)`` range or ``{choices: [...]}`` set (:func:`parse_scale`)
+    from which :class:`EpochSampler` draws one per batch and hands to every item of it (items without one, read
+    directly, get theirs from :class:`Collate`, after the read: point-sampled).
+    ``lr_source``: where the LR frame comes from, the data's sampling convention: ``native`` (the sequence's own
+    ``<H>P`` folder at the scale, rendered at LR as an engine does; an error naming the sequence where it has none),
+    ``point`` (the HR frame point-sampled, the authors' convention, whatever folders exist) or ``auto`` (native
+    where a folder matches the scale, else point-sampled).
     ``patch``: high-resolution patch size for training, ``None`` for full frames.
     ``first_frame``: ``"skip"`` leaves out frames without a previous frame when history is needed;
     ``"zeros"`` keeps them with zero history.
@@ -137,7 +181,10 @@ class FrameDataset(Dataset):
         frame_ranges: dict[str, tuple[int, int]] | None = None,
         sequence_length: int = 1,
         seed: int = 0,
+        lr_source: str = "auto",
     ) -> None:
+        if lr_source not in LR_SOURCES:
+            raise ValueError(f"data.lr_source must be one of {', '.join(LR_SOURCES)}, got {lr_source!r}")
         if first_frame not in ("skip", "zeros"):
             raise ValueError(f"first_frame must be 'skip' or 'zeros', got {first_frame!r}")
         if sequence_length < 1:
@@ -145,7 +192,8 @@ class FrameDataset(Dataset):
         self.sequences = list(sequences)
         self.keys = tuple(keys)
         self.prep = preprocessing or Preprocessing()
-        self.scale = scale
+        self.scale = parse_scale(scale)
+        self.lr_source = lr_source
         self.patch = patch
         self.flips = flips
         self.first_frame = first_frame
@@ -194,13 +242,21 @@ class FrameDataset(Dataset):
             log.info("sequence %r has no emission buffer: its colour is demodulated whole (as if nothing emits)", name)
         return missing
 
-    def native_lr(self, seq: Sequence) -> int | None:
-        """The native low-resolution folder that matches a fixed scale, if any."""
-        if isinstance(self.scale, (tuple, list)) or not self.need["lr"]:
+    def native_lr(self, seq: Sequence, scale: float | None = None) -> int | None:
+        """The native low-resolution folder read at ``scale`` (default: the fixed scale), if any: the one choice of
+        where the LR frame and its G-buffer (:func:`wdss.data.preprocess.lr_guide`) come from (``lr_source``)."""
+        scale = self.scale if scale is None else scale
+        if not isinstance(scale, float) or self.lr_source == "point" or not (self.need["lr"] or self.need["prev_lr"]):
             return None
         for height in seq.resolutions[1:]:
-            if scale_matches(seq.hr, height, float(self.scale)):
+            if scale_matches(seq.hr, height, scale):
                 return height
+        if self.lr_source == "native":
+            folders = ", ".join(f"{h}P" for h in seq.resolutions[1:]) or "none"
+            raise SceneError(
+                f"sequence {seq.name!r} has no native LR folder at scale {scale:g} ({seq.hr}P / {scale:g}; it has "
+                f"{folders}), which data.lr_source=native requires; render it, or set data.lr_source=auto|point"
+            )
         return None
 
     def _frame(self, seq: Sequence, frame: int, lr_height: int | None, window: tuple | None) -> dict:
@@ -268,25 +324,26 @@ class FrameDataset(Dataset):
                 out["ranges"][role] = found
         return out
 
-    def _check_native_lr(self, seq: Sequence, frame: int, lr_height: int) -> None:
+    def _check_native_lr(self, seq: Sequence, frame: int, lr_height: int, scale: float) -> None:
         hr_shape, lr_shape = seq.shape(seq.hr), seq.shape(lr_height)
-        expected = lr_size(*hr_shape, float(self.scale))
+        expected = lr_size(*hr_shape, scale)
         if tuple(lr_shape) != expected:
             raise SceneError(
                 f"sequence {seq.name!r}, frame {frame}: the {lr_height}P frame is {lr_shape[1]}x{lr_shape[0]}, "
-                f"but {hr_shape[1]}x{hr_shape[0]} at scale {self.scale} needs {expected[1]}x{expected[0]}"
+                f"but {hr_shape[1]}x{hr_shape[0]} at scale {scale:g} needs {expected[1]}x{expected[0]}"
             )
 
-    def __getitem__(self, index: int | tuple[int, int]) -> dict:
-        # (index, epoch) from EpochSampler: all randomness is a function of (seed, epoch, index), so a run that
-        # is killed and resumed from its last epoch sees exactly the samples an uninterrupted one would.
-        index, epoch = index if isinstance(index, tuple) else (index, None)
+    def __getitem__(self, index: int | tuple) -> dict:
+        # (index, epoch[, scale]) from EpochSampler: all randomness is a function of (seed, epoch, index), so a run
+        # that is killed and resumed from its last epoch sees exactly the samples an uninterrupted one would.
+        index, epoch, scale = (*index, None)[:3] if isinstance(index, tuple) else (index, None, None)
         rng = torch.Generator().manual_seed(_mix(self.seed, epoch, index)) if epoch is not None else None
         seq_index, frame = self.items[index]
         seq = self.sequences[seq_index]
-        lr_height = self.native_lr(seq)
+        scale = scale if scale is not None else (self.scale if isinstance(self.scale, float) else None)
+        lr_height = self.native_lr(seq, scale) if scale is not None else None
         if lr_height:
-            self._check_native_lr(seq, frame, lr_height)
+            self._check_native_lr(seq, frame, lr_height, scale)
         window = self._window(seq, lr_height and seq.hr / lr_height, rng)
         steps = [self._frame(seq, f, lr_height, window) for f in range(frame - self.sequence_length + 1, frame + 1)]
         flips = (False, False)
@@ -299,6 +356,7 @@ class FrameDataset(Dataset):
                     camera = seq.camera(step["frame"]) if camera is None else camera
                     step[role] = flip(step[role], horizontal=flips[0], vertical=flips[1], camera=camera)
             step["seed"] = _mix(self.seed, epoch, index) if epoch is not None else None
+            step["scale"] = scale
         return steps[0] if self.sequence_length == 1 else {"steps": steps}
 
     def _window(self, seq: Sequence, native_scale: float | None, rng: torch.Generator | None) -> tuple | None:
@@ -336,26 +394,25 @@ class Collate:
         self,
         keys: Iterable[str],
         preprocessing: Preprocessing,
-        scale: float | tuple[float, float],
+        scale: ScaleSpec,
         *,
         on_device: bool = False,
     ) -> None:
         self.keys = set(keys) | {"scale"}
         self.prep = preprocessing
-        self.scale = scale
+        self.scale = parse_scale(scale)
         self.on_device = on_device
 
-    def pick_scale(self, seed: int | None = None) -> float:
-        """The batch's scale: fixed, or drawn from the range (from the first sample's seed when it has one)."""
-        if isinstance(self.scale, (tuple, list)):
-            low, high = self.scale
-            rng = torch.Generator().manual_seed(seed) if seed is not None else None
-            return float(low + (high - low) * torch.rand((), generator=rng).item())
-        return float(self.scale)
+    def pick_scale(self, first: Mapping[str, Any]) -> float:
+        """The batch's scale: the one its samples were read at (:class:`EpochSampler` draws it), else fixed, else
+        drawn here from the first sample's seed (samples read without a scale: their LR is point-sampled)."""
+        if first.get("scale") is not None:
+            return float(first["scale"])
+        return draw_scale(self.scale, first.get("seed"))
 
     def __call__(self, samples: list[dict]) -> dict | RawBatch:
         first = samples[0]["steps"][0] if "steps" in samples[0] else samples[0]
-        scale = self.pick_scale(first.get("seed"))
+        scale = self.pick_scale(first)
         if "steps" in samples[0]:  # sequences: one batch per time step, all at the batch's scale
             length = len(samples[0]["steps"])
             return {"steps": [self._one(self.raw([s["steps"][t] for s in samples], scale)) for t in range(length)]}
@@ -421,10 +478,23 @@ class EpochSampler(Sampler):
     the same number of batches (DDP synchronises every step); in order (evaluation), a contiguous block, so that a
     sequence's frames stay consecutive (a recurrent model and the temporal metrics pair each frame with the one
     before; only a pair cut by a block's start is lost).
+
+    ``scale``: a range or set of scales (:func:`parse_scale`) from which each batch of ``batch_size`` consecutive
+    draws gets one scale, a function of (seed, epoch, batch) too, yielded as ``(index, draw, scale)``: the dataset
+    then knows the scale before it reads, and reads a native LR folder of that scale where the data has one.
     """
 
     def __init__(
-        self, size: int, seed: int = 0, shuffle: bool = True, repeats: int = 1, rank: int = 0, world_size: int = 1
+        self,
+        size: int,
+        seed: int = 0,
+        shuffle: bool = True,
+        repeats: int = 1,
+        rank: int = 0,
+        world_size: int = 1,
+        *,
+        scale: ScaleSpec | None = None,
+        batch_size: int = 1,
     ) -> None:
         if repeats < 1:
             raise ValueError(f"data.patches_per_frame must be >= 1, got {repeats}")
@@ -434,6 +504,8 @@ class EpochSampler(Sampler):
             raise ValueError(f"{size * repeats} samples cannot be shared among {world_size} processes")
         self.size, self.seed, self.shuffle, self.epoch, self.repeats = size, seed, shuffle, 0, repeats
         self.rank, self.world_size = rank, world_size
+        self.scale = None if scale is None or isinstance(scale, float) else parse_scale(scale)
+        self.batch_size = max(1, int(batch_size))
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = epoch
@@ -452,4 +524,12 @@ class EpochSampler(Sampler):
             order = order[: total - total % self.world_size][self.rank :: self.world_size]
         else:
             order = self._block()
-        return iter([(int(v) % self.size, self.epoch * self.repeats + int(v) // self.size) for v in order])
+        draws = [(int(v) % self.size, self.epoch * self.repeats + int(v) // self.size) for v in order]
+        if self.scale is None:
+            return iter(draws)
+        # Seeds of their own (negative batch numbers), so a batch's scale is independent of its samples' crops.
+        scales = [
+            draw_scale(self.scale, _mix(self.seed, self.epoch, -1 - b))
+            for b in range((len(draws) + self.batch_size - 1) // self.batch_size)
+        ]
+        return iter([(index, draw, scales[p // self.batch_size]) for p, (index, draw) in enumerate(draws)])

@@ -28,6 +28,7 @@ from wdss.data.warp import normalize_normals, spatial_mask, temporal_mask, warp_
 
 __all__ = [
     "GBUFFER_STACK",
+    "LR_GUIDE",
     "Preprocessing",
     "RawBatch",
     "brdf_of",
@@ -35,12 +36,16 @@ __all__ = [
     "clean",
     "depth_range",
     "irradiance_of",
+    "lr_guide",
     "prediction_color",
     "target_irradiance",
 ]
 
 # The high-resolution G-buffer stack of the network, in channel order (11 channels).
 GBUFFER_STACK = ("base_color", "depth", "normal", "specular", "roughness", "nov", "metallic")
+# The guide of every LR-side comparison (joint bilateral taps, the learned kernel): the first 7 channels of the
+# stack, albedo 3, depth 1, normal 3, as the LR frame saw them (see :func:`lr_guide`).
+LR_GUIDE = GBUFFER_STACK[:3]
 
 
 @dataclass
@@ -189,6 +194,16 @@ def irradiance_of(buffers: dict[str, Tensor], prep: Preprocessing, brdf: Tensor 
     return demodulate(color, brdf_of(buffers, prep) if brdf is None else brdf)
 
 
+def lr_guide(lr: Mapping[str, Tensor]) -> Tensor:
+    """The G-buffer the LR colour was shaded with, ``(N, 7, h, w)`` (albedo, depth, normal; cleaned as the HR stack
+    is): the LR role's own buffers. Which those are is the data's sampling convention, decided once where the frame
+    is read (:meth:`wdss.data.dataset.FrameDataset.native_lr`): a native LR folder's own G-buffer (rendered at the
+    LR sample positions, as an engine's LR frame is), else the HR G-buffer point-sampled at the LR pixels, exactly
+    the pixels the point-sampled LR colour came from. Every LR-side guide of a model reads this key rather than
+    sampling the HR stack itself, which is right only for point-sampled data."""
+    return torch.cat([lr[name] for name in LR_GUIDE], dim=1)
+
+
 def prediction_color(irradiance: Tensor | None, batch: Mapping[str, Tensor]) -> Tensor | None:
     """A predicted irradiance remodulated with the batch's HR BRDF factor, plus its HR emission where the data
     separates emission (``None`` stays ``None``: display-space models predict no irradiance)."""
@@ -232,6 +247,8 @@ def build_batch(
             batch["lr_brdf"] = lr_brdf
     if "lr_color" in keys:
         batch["lr_color"] = lr["color"]
+    if "lr_guide" in keys:
+        batch["lr_guide"] = lr_guide(lr)
     if "gbuffer" in keys:
         batch["gbuffer"] = torch.cat([hr[name] for name in GBUFFER_STACK], dim=1)
     if "spatial_mask" in keys:

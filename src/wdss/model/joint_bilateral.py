@@ -4,8 +4,9 @@ A classical, parameter-free baseline (after Kopf et al., "Joint bilateral upsamp
 high-resolution pixel takes a weighted mean of the ``2 radius x 2 radius`` low-resolution pixels around its
 position in low-resolution coordinates (``u = (x + 0.5) w / W - 0.5``, cell centres aligned as in
 :mod:`wdss.data.sampling`). The weight is a separable tent ``max(0, 1 - |u - j| / radius)`` per axis times a
-range term comparing the pixel's depth, normal and albedo with those of the low-resolution pixel, whose
-G-buffer is the high-resolution one point-sampled exactly as the data samples its low-resolution frames:
+range term comparing the pixel's depth, normal and albedo with those of the low-resolution pixel: the G-buffer
+the LR colour was shaded with (``lr_guide``, the batch key of that name: a native LR frame's own G-buffer), or,
+without one, the high-resolution G-buffer point-sampled as point-sampled data samples its LR frames:
 
     exp(-dz^2 / (2 sigma_depth^2) - (1 - n.n') / sigma_normal - |da|^2 / (2 sigma_albedo^2))
 
@@ -79,6 +80,7 @@ def neighbourhood(
     lr: Tensor,
     gbuffer: Tensor,
     *,
+    lr_guide: Tensor | None = None,
     sigma_depth: float = 0.01,
     sigma_normal: float = 0.1,
     sigma_albedo: float = 0.1,
@@ -87,7 +89,8 @@ def neighbourhood(
     """The ``2 radius x 2 radius`` LR neighbours of every HR pixel of ``gbuffer``'s grid, one :class:`Tap` each.
 
     The guide differences are scaled so that a range term is a plain squared distance: ``exp(-|difference|^2)``
-    is the module docstring's range weight.
+    is the module docstring's range weight. ``lr_guide`` (N, 7, h, w): the LR pixels' albedo, depth and normal
+    (:func:`wdss.data.preprocess.lr_guide`); ``None``: ``gbuffer``'s first 7 channels point-sampled.
     """
     check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
     if lr.shape[0] != gbuffer.shape[0] or gbuffer.shape[1] < 7:
@@ -95,7 +98,11 @@ def neighbourhood(
     radius = int(radius)
     (h, w), (height, width) = lr.shape[-2:], gbuffer.shape[-2:]
     guide = gbuffer[:, :7].to(lr.dtype)
-    lr_guide = point_sample(guide, (h, w))
+    if lr_guide is None:
+        lr_guide = point_sample(guide, (h, w))
+    elif lr_guide.shape[0] != lr.shape[0] or lr_guide.shape[1] != 7 or lr_guide.shape[-2:] != lr.shape[-2:]:
+        raise ValueError(f"lr_guide {tuple(lr_guide.shape)} is not the (N, 7, h, w) guide of lr {tuple(lr.shape)}")
+    lr_guide = lr_guide.to(lr.dtype)
     scales = torch.tensor(
         [1 / (math.sqrt(2) * sigma_albedo)] * 3
         + [1 / (math.sqrt(2) * sigma_depth)]
@@ -130,12 +137,14 @@ def joint_bilateral_upsample(
     lr: Tensor,
     gbuffer: Tensor,
     *,
+    lr_guide: Tensor | None = None,
     sigma_depth: float = 0.01,
     sigma_normal: float = 0.1,
     sigma_albedo: float = 0.1,
     radius: int = 2,
 ) -> Tensor:
-    """Upsample ``lr`` (N, C, h, w) to the grid of ``gbuffer`` (N, 11, H, W), guided by its depth, normal, albedo.
+    """Upsample ``lr`` (N, C, h, w) to the grid of ``gbuffer`` (N, 11, H, W), guided by its depth, normal, albedo
+    against ``lr_guide``'s (see :func:`neighbourhood`).
 
     See the module docstring for the weights. Returns (N, C, H, W) in ``lr``'s dtype; a convex combination of
     ``lr`` values, so non-negative input stays non-negative.
@@ -144,7 +153,7 @@ def joint_bilateral_upsample(
     total = lr.new_zeros(lr.shape[0], 1, height, width)
     accumulated = lr.new_zeros(lr.shape[0], lr.shape[1], height, width)
     taps = neighbourhood(
-        lr, gbuffer, sigma_depth=sigma_depth, sigma_normal=sigma_normal, sigma_albedo=sigma_albedo, radius=radius
+        lr, gbuffer, lr_guide=lr_guide, sigma_depth=sigma_depth, sigma_normal=sigma_normal, sigma_albedo=sigma_albedo, radius=radius
     )
     for tap in taps:
         weight = range_weight(tap)
@@ -176,7 +185,7 @@ class JointBilateralUpsample(nn.Module):
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr", "gbuffer") if self.demodulated else ("lr_color", "gbuffer", "brdf")
+        return ("lr", "gbuffer", "lr_guide") if self.demodulated else ("lr_color", "gbuffer", "brdf", "lr_guide")
 
     def forward(
         self,
@@ -184,6 +193,7 @@ class JointBilateralUpsample(nn.Module):
         gbuffer: Tensor | None = None,
         lr_color: Tensor | None = None,
         brdf: Tensor | None = None,
+        lr_guide: Tensor | None = None,
         **_: Tensor,
     ) -> dict:
         if gbuffer is None or (self.demodulated and lr is None):
@@ -193,6 +203,7 @@ class JointBilateralUpsample(nn.Module):
         upsampled = joint_bilateral_upsample(
             lr if self.demodulated else lr_color,
             gbuffer,
+            lr_guide=lr_guide,
             sigma_depth=self.sigma_depth,
             sigma_normal=self.sigma_normal,
             sigma_albedo=self.sigma_albedo,

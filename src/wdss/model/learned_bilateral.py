@@ -87,10 +87,15 @@ class LearnedBilateralUpsample(nn.Module):
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr", "gbuffer", "brdf", "lr_brdf") if self.tap_brdf else ("lr", "gbuffer")
+        return ("lr", "gbuffer", "lr_guide") + (("brdf", "lr_brdf") if self.tap_brdf else ())
 
     def upsample(
-        self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, lr_brdf: Tensor | None = None
+        self,
+        lr: Tensor,
+        gbuffer: Tensor,
+        brdf: Tensor | None = None,
+        lr_brdf: Tensor | None = None,
+        lr_guide: Tensor | None = None,
     ) -> Tensor:
         """``lr`` (N, 3, h, w) non-negative irradiance to the grid of ``gbuffer`` (N, 11, H, W): (N, 3, H, W).
 
@@ -98,7 +103,8 @@ class LearnedBilateralUpsample(nn.Module):
         (N, 3, h, w) the one ``lr`` was demodulated with; each tap's value is then ``irradiance * (F_tap / F)^b``,
         ``b`` in [0, 1] learned per pixel and tap (0 at the start): 0 keeps the demodulated estimate, 1 carries the
         tap's own colour (``irradiance * F_tap``) through unchanged, as a colour-space joint bilateral filter would
-        (where ``F_tap / F`` lies within e^5 either way: the ratio is clamped there).
+        (where ``F_tap / F`` lies within e^5 either way: the ratio is clamped there). ``lr_guide`` (N, 7, h, w): the
+        G-buffer the LR was shaded with (:func:`wdss.model.joint_bilateral.neighbourhood`).
         """
         if self.tap_brdf and (brdf is None or lr_brdf is None):
             raise ValueError("this learned bilateral kernel has tap_brdf=true: it needs the HR brdf and the lr_brdf")
@@ -106,7 +112,7 @@ class LearnedBilateralUpsample(nn.Module):
         n, (height, width) = lr.shape[0], gbuffer.shape[-2:]
         # Where each tap lies against the fixed estimate: outliers (fireflies, the other side of an edge) show here.
         # A pass of its own: keeping the 16 taps for one pass would hold ~1.7 GB at 1080p instead of one tap.
-        reference = torch.log1p(joint_bilateral_upsample(lr, gbuffer, **self.ranges))
+        reference = torch.log1p(joint_bilateral_upsample(lr, gbuffer, lr_guide=lr_guide, **self.ranges))
         context = [self.context(gbuffer[:, :GBUFFER_CHANNELS])] if self.context is not None else []
         source = [lr, torch.log1p(lr)]  # gathered together: the values and their logs (and the taps' log F)
         if self.tap_brdf:
@@ -114,7 +120,7 @@ class LearnedBilateralUpsample(nn.Module):
             source.append(torch.log(lr_brdf.float().clamp_min(1e-4)))  # F at the LR pixels, as lr was demodulated
         source = torch.cat(source, 1)
         logits, values = [], []
-        for tap in neighbourhood(source, gbuffer, **self.ranges):
+        for tap in neighbourhood(source, gbuffer, lr_guide=lr_guide, **self.ranges):
             row, col = tap.offset
             features = torch.cat(
                 [
@@ -149,6 +155,12 @@ class LearnedBilateralUpsample(nn.Module):
         return (weights * torch.stack(values)).sum(0)
 
     def forward(
-        self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, lr_brdf: Tensor | None = None, **_: Tensor
+        self,
+        lr: Tensor,
+        gbuffer: Tensor,
+        brdf: Tensor | None = None,
+        lr_brdf: Tensor | None = None,
+        lr_guide: Tensor | None = None,
+        **_: Tensor,
     ) -> dict:
-        return {"irradiance": self.upsample(lr, gbuffer, brdf, lr_brdf), "coefficients": None}
+        return {"irradiance": self.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide), "coefficients": None}

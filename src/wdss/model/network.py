@@ -363,6 +363,8 @@ class WDSSNet(nn.Module):
     def inputs(self) -> tuple[str, ...]:
         """The batch keys this network consumes (the data side reads exactly what these need)."""
         keys = ("lr", "gbuffer", "spatial_mask") + (("history", "temporal_mask") if self.temporal else ())
+        if self.residual in ("joint_bilateral", "learned_bilateral"):  # the kernel compares against the LR's guide
+            keys += ("lr_guide",)
         return keys + (("brdf", "lr_brdf") if self.upsampler is not None and self.upsampler.tap_brdf else ())
 
     def _to_input(self, x: Tensor) -> Tensor:
@@ -378,6 +380,7 @@ class WDSSNet(nn.Module):
         temporal_mask: Tensor | None = None,
         brdf: Tensor | None = None,
         lr_brdf: Tensor | None = None,
+        lr_guide: Tensor | None = None,
         *,
         subbands: bool = True,
     ) -> dict[str, Tensor | None]:
@@ -395,7 +398,7 @@ class WDSSNet(nn.Module):
         guide = gbuffer  # the whole stack: a joint-bilateral residual base reads depth, normal and albedo
         if self.gbuffer_channels is not None:
             gbuffer = gbuffer[:, self.gbuffer_channels]
-        upsampled = self._upsample(lr, guide, brdf, lr_brdf)
+        upsampled = self._upsample(lr, guide, brdf, lr_brdf, lr_guide)
         gb_stack = [gbuffer, spatial_mask] + ([self._to_input(upsampled)] if self.residual_input else [])
         gb_in = F.pixel_unshuffle(_pad(torch.cat(gb_stack, 1), pad_hr), 2)
         lr_fusion, lr_inr = self.lr(lr_in)
@@ -461,7 +464,12 @@ class WDSSNet(nn.Module):
         return image.clamp_min(0.0)
 
     def _upsample(
-        self, lr: Tensor, gbuffer: Tensor, brdf: Tensor | None = None, lr_brdf: Tensor | None = None
+        self,
+        lr: Tensor,
+        gbuffer: Tensor,
+        brdf: Tensor | None = None,
+        lr_brdf: Tensor | None = None,
+        lr_guide: Tensor | None = None,
     ) -> Tensor | None:
         """The upsampled LR irradiance the head adds to (linear, HR size), or None without a residual."""
         if self.residual == "none":
@@ -469,8 +477,9 @@ class WDSSNet(nn.Module):
         if self.residual == "bilinear":
             return F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
         if self.upsampler is not None:
-            return self.upsampler.upsample(lr, gbuffer, brdf, lr_brdf)
-        return joint_bilateral_upsample(lr.float(), gbuffer.float())
+            return self.upsampler.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide)
+        guide = None if lr_guide is None else lr_guide.float()
+        return joint_bilateral_upsample(lr.float(), gbuffer.float(), lr_guide=guide)
 
     def target_coefficients(self, irradiance: Tensor) -> Tensor | None:
         """The analysis of a target irradiance ``(N, 3, H, W)`` in the space and layout of the predicted

@@ -26,7 +26,7 @@ def dummy_inputs(net: nn.Module, height: int, width: int, scale: float, device: 
         "lr": (3, h, w), "lr_color": (3, h, w), "lr_gbuffer": (4, h, w), "prev_lr_color": (3, h, w),
         "prev_lr_gbuffer": (4, h, w), "gbuffer": (11, height, width), "spatial_mask": (1, height, width),
         "history": (3, height, width), "history2": (3, height, width), "temporal_mask": (5, height, width),
-        "brdf": (3, height, width), "lr_brdf": (3, h, w), "motion": (2, height, width),
+        "brdf": (3, height, width), "lr_brdf": (3, h, w), "lr_guide": (7, h, w), "motion": (2, height, width),
     }  # fmt: skip
     inputs = {}
     for name in inspect.signature(net.forward).parameters:
