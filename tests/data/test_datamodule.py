@@ -273,12 +273,14 @@ EMITS = {"passes": ["emission"]}
         ({"denoise": True, "resolution": [96, 48], **EMITS}, None),  # under 200 pixels: never prefiltered
         ({"denoise": False, "resolution": [384, 216], **EMITS}, None),
         ({"denoise": False, "resolution": [384, 216]}, "no emission pass"),  # rendered before the emission pass
+        ({"denoise": False, "resolution": [384, 216], **EMITS, "unsampled": True}, "no LR sampling convention"),
     ],
 )
 def test_a_dataset_rendered_by_an_earlier_wdss_is_refused_by_name(tmp_path, settings, stale):
     calls = []
     write_sequence(tmp_path / "made" / "seq_a", frames=(1, 2), size=(8, 8), scales=())
-    (tmp_path / "made" / "seq_a" / "sequence.json").write_text(json.dumps({"settings": settings}))
+    sampling = {} if settings.pop("unsampled", False) else {"sampling": {"gbuffer": "point-sampled"}}
+    (tmp_path / "made" / "seq_a" / "sequence.json").write_text(json.dumps({"settings": settings, **sampling}))
     dm = SceneDataModule(tmp_path / "made", {"train": ["seq_a"]}, ["target"], patch_size=None, prepare=calls.append)
     if stale:
         with pytest.raises(SceneError, match=rf"made/seq_a was rendered by an earlier wdss: .*{stale}.* Remove "):

@@ -186,7 +186,7 @@ def test_the_colour_space_variant_filters_the_lr_colour():
     torch.testing.assert_close(out * data["brdf"], joint_bilateral_upsample(data["lr_color"], data["gbuffer"]))
     with pytest.raises(ValueError, match="demodulated=false needs lr_color and the HR brdf"):
         model(gbuffer=data["gbuffer"], lr_color=data["lr_color"])
-    assert JointBilateralUpsample().inputs == ("lr", "gbuffer")  # the demodulated default needs no F
+    assert JointBilateralUpsample().inputs == ("lr", "gbuffer", "lr_guide")  # the demodulated default needs no F
     module = SuperResolutionModule(
         {"_target_": "wdss.model.joint_bilateral.JointBilateralUpsample", "demodulated": False}
     )

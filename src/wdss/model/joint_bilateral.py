@@ -153,7 +153,13 @@ def joint_bilateral_upsample(
     total = lr.new_zeros(lr.shape[0], 1, height, width)
     accumulated = lr.new_zeros(lr.shape[0], lr.shape[1], height, width)
     taps = neighbourhood(
-        lr, gbuffer, lr_guide=lr_guide, sigma_depth=sigma_depth, sigma_normal=sigma_normal, sigma_albedo=sigma_albedo, radius=radius
+        lr,
+        gbuffer,
+        lr_guide=lr_guide,
+        sigma_depth=sigma_depth,
+        sigma_normal=sigma_normal,
+        sigma_albedo=sigma_albedo,
+        radius=radius,
     )
     for tap in taps:
         weight = range_weight(tap)

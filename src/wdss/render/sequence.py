@@ -34,7 +34,14 @@ from wdss.render.exposure import auto_exposure
 from wdss.render.scene_file import check_scene, file_digest
 from wdss.render.spec import SceneSpec, camera_pose, intrinsics, random_scene
 
-__all__ = ["frame_files", "preset_settings", "render_preset", "render_sequence", "render_sequences"]
+__all__ = [
+    "frame_files",
+    "preset_settings",
+    "render_preset",
+    "render_sequence",
+    "render_sequences",
+    "sampling_convention",
+]
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +81,21 @@ def _expose(buffers: dict[str, np.ndarray], exposure: float) -> None:
     for name in ("color", "emission"):
         if name in buffers:
             buffers[name] = buffers[name] * np.float32(exposure)
+
+
+def sampling_convention(lr_mode: str, filter_width: float, folders: Mapping[int, int]) -> dict[str, Any]:
+    """How each LR folder relates to the HR frame, as ``sequence.json`` records it (``data.lr_source`` reads it).
+
+    ``point``: LR pixel i is HR pixel floor((i + 0.5) s), colour and G-buffer alike (the authors' data); ``native``:
+    rendered at LR, every buffer sampled at the LR pixel centres (between HR pixel centres at even scales), as an
+    engine renders its LR frame. G-buffers are point-sampled (raster-like) at a pixel filter of at most 0.01
+    pixels, else filtered (anti-aliased) by it."""
+    lr = "native" if lr_mode == "native" else "point"
+    return {
+        "lr": {f"{h}P": {"scale": s, "lr": lr, "jitter": None} for h, s in sorted(folders.items(), reverse=True)},
+        "gbuffer": "point-sampled" if filter_width <= 0.01 else "filtered",
+        "filter_width_px": filter_width,
+    }
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -201,6 +223,7 @@ def render_sequence(
             "motion": "HR pixels, current minus previous screen position, y up",
             "depth": "planar camera depth, background 0",
         },
+        "sampling": sampling_convention(lr_mode, filter_width, {height // s: s for s in scales}),
         "scene": description,
         "frames": [{"frame": f, "camera_to_world": poses[f].tolist()} for f in range(frames + 1)],
         "render_seconds": (previous_meta or {}).get("render_seconds", {}),
@@ -377,13 +400,19 @@ def stale_render(meta: Mapping[str, Any]) -> str | None:
 
     Before 2026-12-04 OpenImageDenoise ran with its prefilter on frames of 200 pixels and more, which blurred
     pixel-scale texture out of the high-resolution targets (a fine checker kept 16 % of its detail); and no
-    emission pass was written, without which emitters are demodulated as if lit."""
+    emission pass was written, without which emitters are demodulated as if lit. Before 2026-12-05 no sampling
+    convention was recorded, and the presets point-sampled their LR folders from the HR frame."""
     settings = meta.get("settings") or {}
     prefiltered = settings.get("denoise") and min(settings.get("resolution") or [0]) >= 200
     if prefiltered and "denoise_prefilter" not in settings:
         return "its targets were denoised with OIDN's prefilter, which blurred pixel-scale texture out of them"
     if "emission" not in (settings.get("passes") or []):
         return "it has no emission pass (Emissive.NNNN.exr), which demodulation subtracts from the colour"
+    if "sampling" not in meta:
+        return (
+            "it records no LR sampling convention (its LR folders were point-sampled from the HR frame; the presets "
+            "now render them natively, as an engine renders its LR frame)"
+        )
     return None
 
 
