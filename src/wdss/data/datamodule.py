@@ -111,7 +111,8 @@ class SceneDataModule(L.LightningDataModule):
     full frames at ``val_scale`` and testing at every scale of ``test_scales`` (one dataloader each).
     ``lr_source`` is the LR sampling convention read: ``auto`` (a native ``<H>P`` folder where one matches the
     scale, else the HR frame point-sampled), ``native`` (required) or ``point`` (always point-sampled).
-    ``patches_per_frame`` random patches of every training frame make one epoch. ``prepare`` is called with ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset).
+    ``patches_per_frame`` random patches of every training frame make one epoch. ``prepare`` is called with
+    ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset).
     """
 
     def __init__(
