@@ -82,8 +82,14 @@ def test_onnx_graph_matches_torch_on_a_fixture_frame(name, tmp_path):
     assert graph.opset_import[0].version >= 17
     names = {i.name for i in graph.graph.initializer}
     layout = json.loads(path.with_suffix(".json").read_text())
-    expected = ["lr", "gbuffer", "spatial_mask", "scale", "history", "temporal_mask", "brdf"]
-    expected += ["lr_brdf"] if name.endswith("tap_brdf") else []  # the F the LR was demodulated with
+    # In the order of the network's forward; the BRDF factor last where the network does not take it.
+    expected = ["lr", "gbuffer", "spatial_mask", "scale", "history", "temporal_mask"]
+    if name == "learned_bilateral":  # the kernel's guide: the G-buffer the LR was shaded with
+        expected += ["lr_guide", "brdf"]
+    elif name == "learned_bilateral_tap_brdf":  # and the F the LR was demodulated with
+        expected += ["brdf", "lr_brdf", "lr_guide"]
+    else:
+        expected += ["brdf"]
     assert [i.name for i in graph.graph.input] == [i["name"] for i in layout["inputs"]] == expected
     assert [o.name for o in graph.graph.output] == ["color", "irradiance"]
     assert layout["inputs"][1]["channels"][:4] == ["base_color.r", "base_color.g", "base_color.b", "depth"]

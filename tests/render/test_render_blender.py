@@ -168,3 +168,39 @@ def test_the_denoiser_keeps_texture_at_the_pixel_scale():
         return float((lap**2).mean())
 
     assert detail(denoised) > 0.4 * detail(reference)  # with the prefilter: a few %
+
+
+def test_a_native_render_records_its_convention_and_its_own_lr_gbuffer_guides_joint_bilateral_better(tmp_path):
+    """At 2x a native LR pixel's centre falls between HR pixel centres: the HR G-buffer point-sampled there is a
+    neighbour's surface, the LR frame's own G-buffer is the one its colour was shaded with."""
+    from wdss.data import Collate, FrameDataset
+    from wdss.data.preprocess import prediction_color
+    from wdss.data.tonemap import hable
+    from wdss.model.joint_bilateral import joint_bilateral_upsample
+    from wdss.model.metrics import psnr
+
+    folder = render_sequence(
+        tmp_path,
+        "native",
+        11,
+        frames=1,
+        resolution=(192, 96),
+        scales=(2,),
+        lr_mode="native",
+        samples=8,
+        objects=(30, 40),
+    )
+    sampling = json.loads((folder / "sequence.json").read_text())["sampling"]
+    assert sampling["lr"] == {"48P": {"scale": 2, "lr": "native", "jitter": None}}
+    assert sampling["gbuffer"] == "point-sampled"
+    keys = ["lr", "lr_guide", "gbuffer", "brdf", "target", "emission"]
+    dataset = FrameDataset([Sequence(folder)], keys, scale=2.0, lr_source="native")
+    batch = Collate(dataset.keys, dataset.prep, 2.0)([dataset[0]])
+
+    def score(irradiance: torch.Tensor) -> float:
+        display = hable(prediction_color(irradiance, batch), exposure=10.0).clamp(0, 1)
+        return float(psnr(display, hable(batch["target"], exposure=10.0).clamp(0, 1)))
+
+    own = score(joint_bilateral_upsample(batch["lr"], batch["gbuffer"], lr_guide=batch["lr_guide"]))
+    sampled = score(joint_bilateral_upsample(batch["lr"], batch["gbuffer"]))
+    assert own > sampled + 0.1, (own, sampled)
