@@ -203,4 +203,4 @@ def test_a_native_render_records_its_convention_and_its_own_lr_gbuffer_guides_jo
 
     own = score(joint_bilateral_upsample(batch["lr"], batch["gbuffer"], lr_guide=batch["lr_guide"]))
     sampled = score(joint_bilateral_upsample(batch["lr"], batch["gbuffer"]))
-    assert own > sampled + 0.1, (own, sampled)
+    assert own > sampled + 0.1, (own, sampled)  # 24.39 against 22.69 dB when written
