@@ -181,7 +181,14 @@ def test_joint_bilateral_is_a_baseline_row(tmp_path):
     assert invalid(cfg) is None and cfg.model.net.sigma_depth == 0.01 and cfg.model.net.radius == 2
     module = instantiate(cfg.model)
     assert not module.trainable and module.configure_optimizers() is None
-    assert set(module.inputs) == {"lr", "gbuffer", "brdf", "target", "emission"}  # no history: temporal none
+    assert set(module.inputs) == {
+        "lr",
+        "gbuffer",
+        "lr_guide",
+        "brdf",
+        "target",
+        "emission",
+    }  # no history: temporal none
     assert run_tags(cfg)["transform"] == run_tags(cfg)["temporal"] == "n/a (baseline)"
 
 

@@ -120,3 +120,17 @@ def test_a_batch_drawn_at_a_native_scale_reads_that_folder(tmp_path):
     torch.testing.assert_close(
         unscaled["lr"], Collate(point.keys, point.prep, 2.0)([point[i] for i, _, _ in items])["lr"]
     )
+
+
+def test_the_test_split_can_read_another_convention_than_training(tmp_path):
+    from wdss.data import SceneDataModule
+
+    _native_like(tmp_path / "scenes" / "seq")
+    splits = {"train": ["seq"], "val": ["seq"], "test": ["seq"]}
+    dm = SceneDataModule(
+        tmp_path / "scenes", splits, KEYS, scale=2.0, patch_size=None, lr_source="native", test_lr_source="point"
+    )
+    dm.setup()
+    assert dm.datasets["train"].lr_source == dm.datasets["val"].lr_source == "native"
+    assert [d.lr_source for d in dm.datasets["test"]] == ["point"] * 3
+    assert SceneDataModule(tmp_path / "scenes", splits, KEYS, lr_source="point").test_lr_source == "point"

@@ -110,7 +110,9 @@ class SceneDataModule(L.LightningDataModule):
     training scale, a ``[low, high]`` range or a ``{choices: [...]}`` set drawn from per batch; validation runs
     full frames at ``val_scale`` and testing at every scale of ``test_scales`` (one dataloader each).
     ``lr_source`` is the LR sampling convention read: ``auto`` (a native ``<H>P`` folder where one matches the
-    scale, else the HR frame point-sampled), ``native`` (required) or ``point`` (always point-sampled).
+    scale, else the HR frame point-sampled), ``native`` (required) or ``point`` (always point-sampled);
+    ``test_lr_source`` the test split's (``None``: the same), so that a model trained on one convention is tested
+    on another.
     ``patches_per_frame`` random patches of every training frame make one epoch. ``prepare`` is called with
     ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset).
     """
@@ -143,6 +145,7 @@ class SceneDataModule(L.LightningDataModule):
         preprocess_on: str = "auto",
         cache_mb: int = 1024,
         lr_source: str = "auto",
+        test_lr_source: str | None = None,
     ) -> None:
         super().__init__()
         if format not in FORMATS:
@@ -162,6 +165,7 @@ class SceneDataModule(L.LightningDataModule):
         self.layout = layout
         self.scale = parse_scale(scale)
         self.lr_source = lr_source
+        self.test_lr_source = lr_source if test_lr_source is None else test_lr_source
         self.val_scale = float(val_scale) if val_scale is not None else self._middle(self.scale)
         self.test_scales = tuple(float(s) for s in test_scales)
         self.patch_size = patch_size
@@ -269,7 +273,7 @@ class SceneDataModule(L.LightningDataModule):
             frame_ranges=ranges,
             sequence_length=self.sequence_length if split == "train" else 1,
             seed=self.seed,
-            lr_source=self.lr_source,
+            lr_source=self.test_lr_source if split == "test" else self.lr_source,
         )
 
     def setup(self, stage: str | None = None) -> None:
