@@ -1,4 +1,4 @@
-"""Benchmarks: ``python -m wdss.bench wavelets|data|model|inference|stability|render|learn|bandlimit``.
+"""Benchmarks: ``python -m wdss.bench wavelets|data|model|inference|stability|render|noise|learn|bandlimit``.
 
 Every benchmark reports medians of repeated runs and ratios measured in the same process, never absolute
 targets: timing on shared machines is noisy, so comparisons are only made within one run.
@@ -662,6 +662,59 @@ def bench_render(
     return table
 
 
+def bench_noise(folders: Sequence[str], frames: Sequence[int] | None, noise_seed: int, record: bool) -> Table:
+    """The targets' own noise: each HR frame of a rendered procedural sequence rendered again as the dataset was
+    (samples, denoiser, filter), with another Cycles seed, and compared with the stored target after the metrics'
+    tone map (Hable, exposure 10). With independent noise of equal variance in both, their mean squared difference
+    is twice the target's noise variance, so a perfect method -- the noise-free frame -- would score ``PSNR(target,
+    re-render) + 10 log10(2)`` against these targets: the ceiling of every PSNR measured on them. ``record`` writes
+    it into the sequence's ``sequence.json`` (``noise``). Needs the ``render`` extra."""
+    import json
+
+    import numpy as np
+
+    from wdss.data.layouts import Sequence as Frames
+    from wdss.data.tonemap import hable
+    from wdss.render.blender import BlenderScene
+    from wdss.render.spec import SceneSpec
+
+    table = Table(title=f"targets' noise: re-rendered with Cycles seed offset {noise_seed}, Hable at exposure 10")
+    for column in ("sequence", "frames", "PSNR target vs re-render (dB)", "ceiling (dB)", "s/frame"):
+        table.add_column(column, justify="right")
+    for folder in map(Path, folders):
+        sidecar = folder / "sequence.json"
+        meta = json.loads(sidecar.read_text()) if sidecar.exists() else {}
+        settings = meta.get("settings", {})
+        if "things" not in (meta.get("scene") or {}) or not meta.get("exposure"):
+            raise SystemExit(f"bench noise: {sidecar} is not a procedural sequence wdss rendered (no scene spec)")
+        spec = SceneSpec.from_dict(meta["scene"])
+        scene = BlenderScene(
+            spec, samples=settings["samples"], denoise=settings["denoise"], filter_width=settings["filter_width"]
+        )
+        scene.scene.cycles.seed = spec.seed + 7919 * noise_seed  # animated per frame as the dataset's
+        sequence = Frames(folder)
+        width, height = settings["resolution"]
+        chosen = [f for f in (frames or sequence.frames) if f in sequence.frames]
+        errors, start = [], time.perf_counter()
+        for frame in chosen:
+            target = torch.from_numpy(sequence.read(frame, sequence.hr, ["color"])["color"])[None]
+            again = torch.from_numpy(scene.render(frame, width, height)["Combined"][None, :3] * meta["exposure"])
+            errors.append(float(((hable(again) - hable(target)) ** 2).mean()))
+        seconds = (time.perf_counter() - start) / max(len(chosen), 1)
+        psnr = -10 * np.log10(max(float(np.mean(errors)), 1e-12))
+        ceiling = psnr + 10 * np.log10(2.0)
+        table.add_row(folder.name, str(len(chosen)), f"{psnr:.2f}", f"{ceiling:.2f}", f"{seconds:.1f}")
+        if record:
+            meta["noise"] = {
+                "ceiling_psnr_db": round(ceiling, 3),
+                "frames": chosen,
+                "how": "python -m wdss.bench noise: PSNR(target, re-render with another Cycles seed) + 10 log10 2, "
+                "Hable at exposure 10",
+            }
+            sidecar.write_text(json.dumps(meta, indent=1))
+    return table
+
+
 class PlainReference(torch.nn.Module):
     """What a plain CNN learns from the same inputs and the same start: four 3x3 convolutions at full resolution
     on log1p of the upsampled LR irradiance (``upsample``: the model's residual upsampler, else bilinear), the
@@ -895,6 +948,11 @@ def main(argv: Sequence[str] | None = None, *, restart: bool = False) -> None:
     ren.add_argument("--size", type=int, nargs=2, default=(384, 216), metavar=("W", "H"))
     ren.add_argument("--samples", type=int, nargs="+", default=[8, 16, 32])
     ren.add_argument("--reference", type=int, default=512)
+    noise = sub.add_parser("noise", help="the targets' noise ceiling: HR frames re-rendered with another seed")
+    noise.add_argument("folders", nargs="+", help="rendered procedural sequences, e.g. data/mini/test_000")
+    noise.add_argument("--frames", type=int, nargs="+", default=None, help="default: every frame")
+    noise.add_argument("--noise-seed", type=int, default=1)
+    noise.add_argument("--record", action="store_true", help="write the ceiling into each sequence.json (noise)")
     learn = sub.add_parser("learn", help="held-out training loss of a configuration beside a plain CNN's")
     learn.add_argument("overrides", nargs="*", help="train config overrides (default experiment=cpu)")
     learn.add_argument("--steps", type=int, default=300)
@@ -929,6 +987,8 @@ def main(argv: Sequence[str] | None = None, *, restart: bool = False) -> None:
             console.print(table)
     elif args.what == "stability":
         console.print(bench_stability())
+    elif args.what == "noise":
+        console.print(bench_noise(args.folders, args.frames, args.noise_seed, args.record))
     elif args.what == "render":
         console.print(bench_render(args.seeds, args.frame, tuple(args.size), args.samples, args.reference))
     elif args.what == "model":

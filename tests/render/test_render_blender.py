@@ -204,3 +204,19 @@ def test_a_native_render_records_its_convention_and_its_own_lr_gbuffer_guides_jo
     own = score(joint_bilateral_upsample(batch["lr"], batch["gbuffer"], lr_guide=batch["lr_guide"]))
     sampled = score(joint_bilateral_upsample(batch["lr"], batch["gbuffer"]))
     assert own > sampled + 0.1, (own, sampled)  # 24.39 against 22.69 dB when written
+
+
+def test_bench_noise_re_renders_the_targets_exactly_with_their_seed_and_measures_noise_with_another(rendered):
+    from wdss.bench import bench_noise
+
+    folder, _ = rendered
+
+    def ceiling(noise_seed: int) -> float:
+        table = bench_noise([str(folder)], [1], noise_seed, record=noise_seed == 1)
+        return float(table.columns[3]._cells[0])
+
+    same, other = ceiling(0), ceiling(1)
+    assert same > 60.0  # the recorded scene spec, exposure and camera give back the stored target
+    assert 10.0 < other < same - 20.0  # 2 spp without a denoiser: plainly noisy
+    recorded = json.loads((folder / "sequence.json").read_text())["noise"]
+    assert recorded["frames"] == [1] and abs(recorded["ceiling_psnr_db"] - other) < 0.01

@@ -229,6 +229,8 @@ def render_sequence(
         "render_seconds": (previous_meta or {}).get("render_seconds", {}),
         # The pre-exposure applied to the radiance of every frame (None until the probes have chosen it).
         "exposure": exposure if exposure != "auto" else (previous_meta or {}).get("exposure"),
+        # The targets' noise ceiling measured on these frames (python -m wdss.bench noise --record) stays theirs.
+        **({"noise": previous_meta["noise"]} if previous_meta and "noise" in previous_meta else {}),
     }
     _write_json(sidecar, meta)
     for stale in folder.rglob(".*.tmp"):  # a render killed while writing leaves only its temporary file

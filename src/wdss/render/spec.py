@@ -71,6 +71,13 @@ class SceneSpec:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    @classmethod
+    def from_dict(cls, data: dict) -> SceneSpec:
+        """The spec a ``sequence.json`` records under ``scene`` (:meth:`to_dict`'s inverse; plain data only)."""
+        things = [Thing(**{**t, "material": Material(**t["material"])}) for t in data["things"]]
+        fields = {k: v for k, v in data.items() if k not in ("ground", "things", "camera")}
+        return cls(**fields, ground=Material(**data["ground"]), things=things, camera=CameraPath(**data["camera"]))
+
 
 def _material(rng: np.random.Generator, *, emissive: bool = False) -> Material:
     metallic = float(rng.random() < 0.3)
