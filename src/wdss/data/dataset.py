@@ -245,7 +245,7 @@ class FrameDataset(Dataset):
     def native_lr(self, seq: Sequence, scale: float | None = None) -> int | None:
         """The native low-resolution folder read at ``scale`` (default: the fixed scale), if any: the one choice of
         where the LR frame and its G-buffer (:func:`wdss.data.preprocess.lr_guide`) come from (``lr_source``)."""
-        scale = self.scale if scale is None else scale
+        scale = self.scale if scale is None else scale  # a range or set: the batch's scale is not known here
         if not isinstance(scale, float) or self.lr_source == "point" or not (self.need["lr"] or self.need["prev_lr"]):
             return None
         for height in seq.resolutions[1:]:
@@ -340,8 +340,8 @@ class FrameDataset(Dataset):
         rng = torch.Generator().manual_seed(_mix(self.seed, epoch, index)) if epoch is not None else None
         seq_index, frame = self.items[index]
         seq = self.sequences[seq_index]
-        scale = scale if scale is not None else (self.scale if isinstance(self.scale, float) else None)
-        lr_height = self.native_lr(seq, scale) if scale is not None else None
+        scale = scale if scale is not None else self.scale  # the sampler's draw, else the fixed scale (or a spec)
+        lr_height = self.native_lr(seq, scale)
         if lr_height:
             self._check_native_lr(seq, frame, lr_height, scale)
         window = self._window(seq, lr_height and seq.hr / lr_height, rng)
@@ -356,7 +356,7 @@ class FrameDataset(Dataset):
                     camera = seq.camera(step["frame"]) if camera is None else camera
                     step[role] = flip(step[role], horizontal=flips[0], vertical=flips[1], camera=camera)
             step["seed"] = _mix(self.seed, epoch, index) if epoch is not None else None
-            step["scale"] = scale
+            step["scale"] = scale if isinstance(scale, float) else None  # None: Collate draws it, after the read
         return steps[0] if self.sequence_length == 1 else {"steps": steps}
 
     def _window(self, seq: Sequence, native_scale: float | None, rng: torch.Generator | None) -> tuple | None:

@@ -478,8 +478,7 @@ class WDSSNet(nn.Module):
             return F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
         if self.upsampler is not None:
             return self.upsampler.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide)
-        guide = None if lr_guide is None else lr_guide.float()
-        return joint_bilateral_upsample(lr.float(), gbuffer.float(), lr_guide=guide)
+        return joint_bilateral_upsample(lr.float(), gbuffer.float(), lr_guide=lr_guide)  # the guide in lr's dtype
 
     def target_coefficients(self, irradiance: Tensor) -> Tensor | None:
         """The analysis of a target irradiance ``(N, 3, H, W)`` in the space and layout of the predicted
