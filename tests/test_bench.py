@@ -220,3 +220,19 @@ def test_bandlimit_bound_falls_with_the_scale_on_the_fixture(capsys):
     [row] = [cells for (name, _), cells in table_rows(capsys.readouterr().out).items() if name == "fixture_000"]
     bound_2x, bound_3x, bound_4x = map(float, row)
     assert 10.0 < bound_4x <= bound_3x <= bound_2x < 60.0  # nested subspaces: a coarser grid holds less
+
+
+def test_guidance_scores_every_method_with_each_property_on_the_fixture(capsys):
+    from wdss.paths import PROJECT_ROOT
+
+    fixture = str(PROJECT_ROOT / "tests" / "fixtures" / "rendered")
+    bench.main(["guidance", fixture, "--scales", "2", "--properties", "none", "unnormalised_normals", "filtered"])
+    rows = table_rows(capsys.readouterr().out)
+    plain, short, filtered = rows["2x", "none"], rows["2x", "unnormalised_normals"], rows["2x", "filtered"]
+    assert plain == short  # the loader renormalises normals: a property no method can notice
+    bilinear, joint = float(plain[0]), float(plain[1].split()[0])
+    assert joint > bilinear > 10.0  # guided by the G-buffer, on the data it was made for
+    assert float(plain[1].split()[1].strip("()")) == pytest.approx(joint - bilinear, abs=0.011)
+    assert filtered != plain
+    with pytest.raises(SystemExit, match="unknown properties"):
+        bench.main(["guidance", fixture, "--properties", "sharpened"])

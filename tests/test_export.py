@@ -114,6 +114,7 @@ def test_dynamic_export_takes_other_even_sizes_and_the_training_preprocessing(tm
     layout = json.loads(path.with_suffix(".json").read_text())
     assert layout["size"]["dynamic"] and layout["inputs"][0]["shape"] == [1, 3, "2*half_lr_height", "2*half_lr_width"]
     assert layout["preprocessing"]["color_max"] == 10.0 and layout["preprocessing"]["depth_far"] == 50.0
+    assert layout["preprocessing"]["brdf_knee"] == 0.0  # a run from before the knee: the hard switch it trained with
 
 
 def test_fp16_export_stays_close_to_float32_torch(tmp_path):

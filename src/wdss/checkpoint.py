@@ -56,4 +56,9 @@ def training_preprocessing(path: str | Path) -> dict[str, Any]:
     if not config.is_file():
         return {}
     node = OmegaConf.select(OmegaConf.load(config), "data.preprocessing")
-    return dict(OmegaConf.to_container(node, resolve=True)) if node is not None else {}
+    if node is None:
+        return {}
+    prep = dict(OmegaConf.to_container(node, resolve=True))
+    # Runs from before the knee existed demodulated with the hard switch: their models expect exactly that.
+    prep.setdefault("brdf_knee", 0.0)
+    return prep

@@ -16,9 +16,9 @@ from typing import Any
 import hydra
 import lightning as L
 import numpy as np
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 
-from wdss.checkpoint import read_checkpoint
+from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.exr import write_exr
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
@@ -97,11 +97,31 @@ def _eval_logger(cfg: DictConfig, ckpt: Path) -> Any:
     return instantiate(cfg.logger, experiment_name=experiment_name, run_name=f"eval {ckpt.name}", tags=tags)
 
 
+def _command_line_keys() -> set[str]:
+    """The dotted keys this run's command line set (empty outside a Hydra app)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    if not HydraConfig.initialized():
+        return set()
+    return {item.split("=", 1)[0].lstrip("+~") for item in HydraConfig.get().overrides.task}
+
+
+def _as_trained(cfg: DictConfig, ckpt: Path) -> None:
+    """``data.preprocessing`` as the checkpoint's training run had it (a model must see its inputs demodulated and
+    normalised as in training, whatever the defaults are now), but for the keys set on this command line."""
+    given = _command_line_keys()
+    with open_dict(cfg):
+        for key, value in training_preprocessing(ckpt).items():
+            if f"data.preprocessing.{key}" not in given and "data.preprocessing" not in given:
+                cfg.data.preprocessing[key] = value
+
+
 def evaluate(cfg: DictConfig) -> dict[str, float]:
     ckpt = Path(str(cfg.ckpt_path))
     # Both the config and the checkpoint's stored model config build only allowlisted callables (wdss.targets).
     check_targets(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
     read_checkpoint(ckpt)
+    _as_trained(cfg, ckpt)
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
     logger = _eval_logger(cfg, ckpt)

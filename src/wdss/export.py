@@ -60,13 +60,17 @@ CHANNELS: dict[str, tuple[str, list[str], str]] = {
         "(LR colour - LR emission) / the LR BRDF factor when demodulated (else the LR colour); see preprocessing",
     ),
     "lr_color": ("low", list(_RGB), "LR colour"),
-    "lr_brdf": ("low", list(_RGB), "LR BRDF factor"),
+    "lr_brdf": ("low", list(_RGB), "LR BRDF factor, as brdf's"),
     "lr_guide": (
         "low",
         [c for b in LR_GUIDE for c in _channels(b)],
         "the G-buffer the LR colour was shaded with (the LR frame's own; preprocessed as the HR stack's channels)",
     ),
-    "brdf": ("high", list(_RGB), "HR BRDF factor F (1 where F < 1e-4): color = irradiance * brdf"),
+    "brdf": (
+        "high",
+        list(_RGB),
+        "HR BRDF factor (wdss.data.brdf.safe_brdf of F at preprocessing.brdf_knee): color = irradiance * brdf",
+    ),
     "gbuffer": ("high", [c for b in GBUFFER_STACK for c in _channels(b)], "HR G-buffer stack"),
     "spatial_mask": ("high", ["mask"], "1 where the HR G-buffer differs from the bilinearly upsampled LR one"),
     "history": ("high", list(_RGB), "previous irradiance, warped to this frame by the motion vectors"),
@@ -266,6 +270,13 @@ def input_layout(
                 "split_sum": "F = base (1 - metallic) + F0 A + B, (A, B) = wdss.data.brdf.ggx_lut(NoV, roughness)",
             }[prep.brdf],
             "brdf_name": prep.brdf,
+            # The factor divided by (lr, history) and multiplied by (brdf): safe_brdf(F, knee)
+            "brdf_knee": prep.brdf_knee,
+            "brdf_factor": (
+                f"F + (1 - F) exp(-(F / {prep.brdf_knee:g})^2)"
+                if prep.brdf_knee > 0
+                else "F, or 1 where F <= 1e-4 (or not finite)"
+            ),
             "depth_far": prep.depth_far,  # depth beyond it is set to 0 (background)
             "depth_normalize": prep.depth_normalize,  # per frame (min, max) -> (0, 1); LR by its HR frame's range
             "normals": "unit length, world space",

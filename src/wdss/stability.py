@@ -13,7 +13,7 @@ import numpy as np
 import pywt
 import torch
 
-from wdss.data.brdf import demodulate, remodulate, safe_brdf
+from wdss.data.brdf import BRDF_KNEE, demodulate, remodulate, safe_brdf
 from wdss.data.tonemap import hable
 from wdss.data.warp import spatial_mask, temporal_mask, warp_backward
 from wdss.wavelets import analysis, synthesis
@@ -89,15 +89,15 @@ def _wavelet_cases() -> list[Case]:
 def _brdf_cases() -> list[Case]:
     cases = []
     radiance = torch.logspace(-6, 5, 12, dtype=torch.float64).view(1, 1, 1, 12).expand(1, 3, 4, 12).float()
-    for label, value in (("F = 0", 0.0), ("F = 1e-8", 1e-8), ("F = 1e4", 1e4), ("F = 0.3", 0.3)):
-        brdf = safe_brdf(torch.full_like(radiance, value))
-        back = remodulate(demodulate(radiance, brdf), brdf)
-        ref = radiance.double().numpy()
-        cases.append(
-            Case("brdf", f"{label}, radiance 1e-6..1e5", _rel(back, ref) if value else 0.0, _finite(back), 1e-6)
-        )
-        if value == 0:  # pass-through is exact, not merely close
-            cases[-1].error = float((back - radiance).abs().max())
+    for knee in (0.0, BRDF_KNEE):
+        for label, value in (("F = 0", 0.0), ("F = 1e-8", 1e-8), ("F = 1e4", 1e4), ("F = 0.3", 0.3)):
+            brdf = safe_brdf(torch.full_like(radiance, value), knee=knee)
+            back = remodulate(demodulate(radiance, brdf), brdf)
+            ref = radiance.double().numpy()
+            name = f"{label}, knee {knee:g}, radiance 1e-6..1e5"
+            cases.append(Case("brdf", name, _rel(back, ref) if value else 0.0, _finite(back), 1e-6))
+            if value == 0:  # pass-through is exact, not merely close
+                cases[-1].error = float((back - radiance).abs().max())
     black = torch.zeros(1, 3, 2, 2)
     emitter = torch.full((1, 3, 2, 2), 3e4)
     brdf = safe_brdf(black + (1 - 0.0) * 0.08 * 0.0)

@@ -423,7 +423,9 @@ def test_emission_is_taken_out_before_demodulation_and_comes_back_at_high_resolu
 
     write_sequence(tmp_path / "glow", layout=layout, frames=(1, 2), size=HR, scales=(2,), emission=True)
     keys = ["lr", "brdf", "target", "emission", "history"]
-    dataset = FrameDataset([Sequence(tmp_path / "glow")], keys, scale=2.0, first_frame="zeros")
+    # The hard switch: demodulation is exact wherever F is not replaced by 1 (the knee blends dark pixels).
+    prep = Preprocessing(brdf_knee=0.0)
+    dataset = FrameDataset([Sequence(tmp_path / "glow")], keys, scale=2.0, first_frame="zeros", preprocessing=prep)
     batch = Collate(dataset.keys, dataset.prep, 2.0)([dataset[1]])  # frame 2
     emission = batch["emission"]
     glow = (emission[0, 0] == 2.0) & (batch["brdf"][0, 0] != 1.0)  # the textured emitter (F is not replaced by 1)

@@ -115,7 +115,7 @@ def test_a_patch_reads_only_its_tiles_and_history_from_outside_the_patch_is_kept
         (y, x, size, _), _ = dataset._window(packed, None, torch.Generator().manual_seed(_mix(0, epoch, 0)))
         patch = collate([sample])
         for key in ("history", "temporal_mask"):  # the whole frame's, cut: not zeros at the patch's border
-            torch.testing.assert_close(patch[key], full[key][..., y : y + size, x : x + size], rtol=1e-5, atol=1e-5)
+            torch.testing.assert_close(patch[key], full[key][..., y : y + size, x : x + size], rtol=1e-4, atol=1e-5)
 
 
 @pytest.mark.parametrize("codec", ["lz4", "zstd"])

@@ -37,13 +37,59 @@ def test_extranet_brdf_formula():
 def test_demodulation_round_trip_keeps_zero_and_tiny_brdf_pixels():
     color = torch.tensor([[[[2.0, 5.0, 1e-6, 7.0, 3.0]]]]).expand(1, 3, 1, 5).clone()
     raw = torch.tensor([[[[0.5, 0.0, 1e-8, 1e4, float("nan")]]]]).expand(1, 3, 1, 5)
-    brdf = safe_brdf(raw)
+    brdf = safe_brdf(raw, knee=0.0)  # the hard switch
     assert brdf[0, 0, 0].tolist() == [0.5, 1.0, 1.0, 1e4, 1.0]
     irradiance = demodulate(color, brdf)
     assert torch.isfinite(irradiance).all()
     # F = 0, tiny and NaN pass through untouched (sky, emitters); others are divided.
     assert irradiance[0, 0, 0].tolist() == pytest.approx([4.0, 5.0, 1e-6, 7e-4, 3.0])
     torch.testing.assert_close(remodulate(irradiance, brdf), color, rtol=1e-6, atol=0)
+
+
+def test_brdf_knee_is_continuous_passes_zero_through_and_keeps_bright_albedo():
+    f = torch.linspace(0, 1, 100001, dtype=torch.float64).view(1, 1, 1, -1)
+    safe = safe_brdf(f, knee=0.02)
+    assert float(safe[..., 0]) == 1.0  # F = 0 (sky, black albedo) passes through as before
+    assert float(safe.min()) > 0.04  # never a division by a tiny factor
+    assert float(safe.diff(dim=-1).abs().max()) < 1e-3  # steps of 1e-5 in F: no jump anywhere
+    bright = f > 0.08
+    torch.testing.assert_close(safe[bright], f[bright], atol=1e-4, rtol=0)  # demodulation proper where F is large
+    # The hard switch (knee 0) jumps from 1 to 1e-4 at its threshold: the factor a silhouette pixel was divided by.
+    hard = safe_brdf(torch.tensor([1e-4, 1.0001e-4], dtype=torch.float64), knee=0.0)
+    assert hard.tolist() == [1.0, 1.0001e-4]
+    odd = safe_brdf(torch.tensor([float("nan"), float("inf"), -0.5]), knee=0.1)
+    assert odd.tolist() == [1.0, 1.0, 1.0]
+    with pytest.raises(ValueError, match="knee"):
+        safe_brdf(f, knee=-0.1)
+
+
+def test_brdf_knee_round_trip_is_exact():
+    color = torch.rand(1, 3, 8, 8, dtype=torch.float64) * 10
+    raw = torch.rand(1, 3, 8, 8, dtype=torch.float64) ** 4  # many dark pixels
+    brdf = safe_brdf(raw, knee=0.02)
+    torch.testing.assert_close(remodulate(demodulate(color, brdf), brdf), color)
+
+
+def test_brdf_knee_keeps_an_anti_aliased_silhouette_against_the_sky_in_range():
+    """A row of an anti-aliased render: sky (F = 0, radiance 2) meets a lit grey object (F = 0.5, irradiance 1); the
+    edge pixel is the pixel filter's mix of both in colour and in albedo alike. Upsampled by two in demodulated space
+    (linear interpolation), the hard switch divides the edge pixel's colour by its small F and spreads the result
+    over the object: its error is many times the knee's."""
+    coverage = torch.tensor([0.0, 0.0, 0.0, 0.03, 1.0, 1.0, 1.0, 1.0], dtype=torch.float64)  # object coverage per LR px
+    albedo = 0.5 * coverage
+    color = 2.0 * (1 - coverage) + 0.5 * coverage
+    hr_coverage = coverage.repeat_interleave(2)
+    hr_albedo, hr_color = 0.5 * hr_coverage, 2.0 * (1 - hr_coverage) + 0.5 * hr_coverage
+
+    def upsampled(knee: float) -> torch.Tensor:
+        lr_f = safe_brdf(albedo.view(1, 1, 1, -1), knee=knee)
+        irradiance = demodulate(color.view(1, 1, 1, -1), lr_f)
+        up = torch.nn.functional.interpolate(irradiance, scale_factor=(1, 2), mode="bilinear", align_corners=False)
+        return up * safe_brdf(hr_albedo.view(1, 1, 1, -1), knee=knee)
+
+    error = {knee: float((upsampled(knee) - hr_color).abs().max()) for knee in (0.0, 0.02)}
+    assert error[0.0] > 5 * error[0.02]
+    assert error[0.02] < 1.0
 
 
 def test_split_sum_table_is_physical():

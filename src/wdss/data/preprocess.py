@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf, split_sum_brdf
+from wdss.data.brdf import BRDF_KNEE, demodulate, extranet_brdf, safe_brdf, split_sum_brdf
 from wdss.data.sampling import lr_size, point_sample
 from wdss.data.warp import normalize_normals, spatial_mask, temporal_mask, warp_backward
 
@@ -53,6 +53,9 @@ class Preprocessing:
     """How buffers become batch tensors (the ``data.preprocessing`` config)."""
 
     brdf: str = "extranet"  # extranet | split_sum
+    # F below about this blends continuously towards 1 (wdss.data.brdf.safe_brdf); 0: the hard switch at 1e-4,
+    # which anti-aliased G-buffers break (every silhouette against the sky divides by ~0.01).
+    brdf_knee: float = BRDF_KNEE
     demodulate: bool = True  # lr and history are irradiance (colour / F) rather than colour
     # Emitted light (the emission buffer) is subtracted from the colour before demodulation and added back at
     # high resolution: an emitter's colour is not F times an irradiance. true: every sequence must have the
@@ -69,6 +72,8 @@ class Preprocessing:
             raise ValueError(f"data.preprocessing.brdf must be 'extranet' or 'split_sum', got {self.brdf!r}")
         if self.emission not in (True, False, "auto"):
             raise ValueError(f"data.preprocessing.emission must be true, false or auto, got {self.emission!r}")
+        if not isinstance(self.brdf_knee, int | float) or isinstance(self.brdf_knee, bool) or self.brdf_knee < 0:
+            raise ValueError(f"data.preprocessing.brdf_knee must be a number >= 0, got {self.brdf_knee!r}")
 
     @property
     def separates_emission(self) -> bool:
@@ -179,7 +184,7 @@ def brdf_of(buffers: dict[str, Tensor], prep: Preprocessing) -> Tensor:
         )
     else:
         raw = extranet_brdf(buffers["base_color"], buffers["metallic"], buffers["specular"])
-    return safe_brdf(raw)
+    return safe_brdf(raw, knee=float(prep.brdf_knee))
 
 
 def irradiance_of(buffers: dict[str, Tensor], prep: Preprocessing, brdf: Tensor | None = None) -> Tensor:
