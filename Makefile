@@ -9,7 +9,7 @@ PY := $(VENV)/bin/python
 PIP_INSTALL := $(PY) -m pip install --disable-pip-version-check -q -c constraints.txt
 export MLFLOW_DISABLE_TELEMETRY ?= true
 
-.PHONY: help setup setup-render setup-cluster test test-fast lint format train ui server bench data pack clean
+.PHONY: help setup setup-render setup-cluster test test-fast lint format train ui server bench data data-bench pack clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | sort | \
@@ -36,6 +36,9 @@ $(VENV)/.installed-cluster: $(VENV)/.installed
 
 data: setup-render ## render the default dataset (data/mini, a few minutes) ahead of training
 	$(PY) -m wdss.render -cn mini
+
+data-bench: setup-render ## render the benchmark dataset (data/bench: 54 scenes, noise ceilings; ~1 hour, resumable)
+	$(PY) -m wdss.render -cn bench
 
 pack: setup-render ## pack data/mini into data/mini.packed (read patch by patch; training uses it when present)
 	test -d data/mini || $(PY) -m wdss.render -cn mini

@@ -235,3 +235,18 @@ def test_temporal_columns_the_per_frame_psnr_plot_and_three_frames_of_the_crop(t
     assert (out / "frames.png").stat().st_size > 0
     # A row per frame (t, t+1, t+2) of the 96-pixel crop: three times the height of the one-frame figure.
     assert Image.open(out / "qualitative.png").size[1] > 800
+
+
+def test_the_targets_noise_ceiling_is_stated_below_the_table_and_is_no_column(tmp_path, three_seeds):
+    assert "Targets' noise ceiling: not measured" in (three_seeds / "table.md").read_text()
+    ceilings = {"test/noise_ceiling_test_000": 40.0, "test/noise_ceiling_test_001": 42.0, "test/noise_ceiling": 41.0}
+    jobs = [
+        ({"variant": v, "seed": str(s)}, {"test/psnr_2x": 30.0 + s, "test/psnr_3x": 29.0, **ceilings}, "FINISHED")
+        for v in ("swt_haar", "swt_db4")
+        for s in SEEDS
+    ]
+    uri = fake_sweep(tmp_path, "ablation_wavelet", jobs)
+    text = (report("ablation_wavelet", tracking_uri=uri, out_dir=tmp_path / "reports") / "table.md").read_text()
+    assert "no row can exceed it): 41.00 dB mean (test_000 40.00, test_001 42.00)." in text
+    header, _ = body(text)
+    assert all(h.startswith(("Configuration", "PSNR", "n")) for h in header) and "noise" not in text.split("Targets")[0]

@@ -663,19 +663,14 @@ def bench_render(
 
 
 def bench_noise(folders: Sequence[str], frames: Sequence[int] | None, noise_seed: int, record: bool) -> Table:
-    """The targets' own noise: each HR frame of a rendered procedural sequence rendered again as the dataset was
-    (samples, denoiser, filter), with another Cycles seed, and compared with the stored target after the metrics'
-    tone map (Hable, exposure 10). With independent noise of equal variance in both, their mean squared difference
-    is twice the target's noise variance, so a perfect method -- the noise-free frame -- would score ``PSNR(target,
-    re-render) + 10 log10(2)`` against these targets: the ceiling of every PSNR measured on them. ``record`` writes
-    it into the sequence's ``sequence.json`` (``noise``). Needs the ``render`` extra."""
+    """The targets' own noise of rendered procedural sequences (:func:`wdss.render.noise.measure_noise`: each HR
+    frame rendered again with another Cycles seed; the ceiling every PSNR measured on these targets lies under).
+    ``record`` writes it into each sequence's ``sequence.json`` (``noise``). Needs the ``render`` extra."""
     import json
 
-    import numpy as np
-
     from wdss.data.layouts import Sequence as Frames
-    from wdss.data.tonemap import hable
     from wdss.render.blender import BlenderScene
+    from wdss.render.noise import measure_noise
     from wdss.render.spec import SceneSpec
 
     table = Table(title=f"targets' noise: re-rendered with Cycles seed offset {noise_seed}, Hable at exposure 10")
@@ -687,30 +682,23 @@ def bench_noise(folders: Sequence[str], frames: Sequence[int] | None, noise_seed
         settings = meta.get("settings", {})
         if "things" not in (meta.get("scene") or {}) or not meta.get("exposure"):
             raise SystemExit(f"bench noise: {sidecar} is not a procedural sequence wdss rendered (no scene spec)")
-        spec = SceneSpec.from_dict(meta["scene"])
         scene = BlenderScene(
-            spec, samples=settings["samples"], denoise=settings["denoise"], filter_width=settings["filter_width"]
+            SceneSpec.from_dict(meta["scene"]),
+            samples=settings["samples"],
+            denoise=settings["denoise"],
+            filter_width=settings["filter_width"],
         )
-        scene.scene.cycles.seed = spec.seed + 7919 * noise_seed  # animated per frame as the dataset's
-        sequence = Frames(folder)
-        width, height = settings["resolution"]
-        chosen = [f for f in (frames or sequence.frames) if f in sequence.frames]
-        errors, start = [], time.perf_counter()
-        for frame in chosen:
-            target = torch.from_numpy(sequence.read(frame, sequence.hr, ["color"])["color"])[None]
-            again = torch.from_numpy(scene.render(frame, width, height)["Combined"][None, :3] * meta["exposure"])
-            errors.append(float(((hable(again) - hable(target)) ** 2).mean()))
-        seconds = (time.perf_counter() - start) / max(len(chosen), 1)
-        psnr = -10 * np.log10(max(float(np.mean(errors)), 1e-12))
-        ceiling = psnr + 10 * np.log10(2.0)
-        table.add_row(folder.name, str(len(chosen)), f"{psnr:.2f}", f"{ceiling:.2f}", f"{seconds:.1f}")
+        noise = measure_noise(scene, folder, meta["exposure"], frames or Frames(folder).frames, noise_seed)
+        ceiling = noise["ceiling_psnr_db"]
+        table.add_row(
+            folder.name,
+            str(len(noise["frames"])),
+            f"{ceiling - 10 * math.log10(2.0):.2f}",
+            f"{ceiling:.2f}",
+            f"{noise['seconds_per_frame']:.1f}",
+        )
         if record:
-            meta["noise"] = {
-                "ceiling_psnr_db": round(ceiling, 3),
-                "frames": chosen,
-                "how": "python -m wdss.bench noise: PSNR(target, re-render with another Cycles seed) + 10 log10 2, "
-                "Hable at exposure 10",
-            }
+            meta["noise"] = noise
             sidecar.write_text(json.dumps(meta, indent=1))
     return table
 

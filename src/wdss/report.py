@@ -204,7 +204,7 @@ def _tags(run) -> dict[str, str]:
 
 def _scale_metric(key: str) -> tuple[str, str] | None:
     """``test/psnr_3x`` -> ``("psnr", "3x")``; None for anything else."""
-    if not key.startswith("test/") or "_" not in key:
+    if not key.startswith("test/") or "_" not in key or key.startswith("test/noise_ceiling"):
         return None
     name, scale = key[len("test/") :].rsplit("_", 1)
     return (name, scale) if scale.endswith("x") and scale[:-1].replace(".", "").isdigit() else None
@@ -407,6 +407,36 @@ def metric_path(runs: Sequence) -> str:
     return "; ".join(sorted(paths))
 
 
+def noise_ceiling_note(runs: Sequence) -> str:
+    """The targets' noise ceiling of the test sequences, as the runs logged it (``test/noise_ceiling*``: the PSNR a
+    perfect method would score against these targets, :mod:`wdss.render.noise`), or why there is none."""
+    found = set()
+    for run in runs:
+        metrics = run.data.metrics
+        if "test/noise_ceiling" in metrics:
+            per = sorted(
+                (k.removeprefix("test/noise_ceiling_"), v)
+                for k, v in metrics.items()
+                if k.startswith("test/noise_ceiling_")
+            )
+            found.add((round(metrics["test/noise_ceiling"], 2), tuple((name, round(v, 2)) for name, v in per)))
+    if not found:
+        return (
+            "\nTargets' noise ceiling: not measured for these test sequences (render them with noise_ceiling: true, "
+            "or python -m wdss.bench noise --record).\n"
+        )
+    sets = [
+        f"{mean:.2f} dB mean" + (f" ({', '.join(f'{name} {v:.2f}' for name, v in per)})" if per else "")
+        for mean, per in sorted(found)
+    ]
+    return (
+        "\nTargets' noise ceiling (the PSNR a perfect method would score against these targets; no row can exceed it): "
+        + "; ".join(sets)
+        + (" -- the runs tested different data" if len(sets) > 1 else "")
+        + ".\n"
+    )
+
+
 def pareto(points: list[tuple[float, float]], higher_is_better: bool) -> list[int]:
     """Indices of the points no other point beats in both cost (lower) and quality."""
     front = []
@@ -604,6 +634,7 @@ def report(
         + compact_table(rows, metrics, notes, columns, scales)
         + orderings(name, groups, shown, scales)
         + (TEMPORAL_NOTE if any("twe_ratio" in key or "tpsnr" in key for key, *_ in columns) else "")
+        + (noise_ceiling_note(runs) if scales else "")
         + f"\nMetrics on tone-mapped output: {metric_path(runs)}. {len(runs)} runs ({counts}); "
         + f"parent run {parent_run.info.run_id}; every metric at every scale in table.csv.\n"
     )

@@ -31,7 +31,7 @@ from wdss.progress_bar import progress_bar
 from wdss.targets import TargetRefused, check_targets, instantiate
 from wdss.tracking import RUN_ID_FILE, ensure_experiment, prepare_store, reap_dead_runs, run_name, run_tags
 
-__all__ = ["ConfigError", "main", "train", "validate"]
+__all__ = ["ConfigError", "main", "noise_ceiling_metrics", "train", "validate"]
 
 
 class ConfigError(ValueError):
@@ -251,6 +251,11 @@ def train(cfg: DictConfig) -> dict[str, float]:
                 module, datamodule=datamodule, ckpt_path=best or None, weights_only=True, verbose=sys.stdout.isatty()
             )
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")})
+            if trainer.is_global_zero:
+                ceilings = noise_ceiling_metrics(module, datamodule)
+                if ceilings:
+                    logger.log_metrics(ceilings)
+                metrics.update(ceilings)
         if trainer.is_global_zero:
             metrics.update(_bench(cfg, module, logger))
     except BaseException as error:
@@ -261,6 +266,24 @@ def train(cfg: DictConfig) -> dict[str, float]:
         logger.finalize("KILLED")
         print(f"wdss.train: stopped by {stopped_by.name}; resume with ckpt_path=last (checkpoints in {output_dir})")
         raise SystemExit(128 + stopped_by) from error
+    return metrics
+
+
+def noise_ceiling_metrics(module: Any, datamodule: Any) -> dict[str, float]:
+    """The test sequences' recorded noise ceilings as metrics: ``test/noise_ceiling_<sequence>`` and, when every test
+    sequence has one, ``test/noise_ceiling`` (their mean weighted by frames): the PSNR no method can exceed on
+    these targets. Only where the metrics' display transform is the one they were measured with (Hable, exposure 10).
+    """
+    from wdss.data.datamodule import SceneDataModule
+
+    tone = module.tone
+    if not isinstance(datamodule, SceneDataModule) or tone.name != "hable" or tone.exposure not in (None, 10, 10.0):
+        return {}
+    ceilings = datamodule.noise_ceilings("test")
+    metrics = {f"test/noise_ceiling_{name}": value for name, (value, _) in ceilings.items()}
+    if ceilings and len(ceilings) == len(datamodule.splits["test"][0]):
+        frames = sum(n for _, n in ceilings.values())
+        metrics["test/noise_ceiling"] = sum(value * n for value, n in ceilings.values()) / frames
     return metrics
 
 

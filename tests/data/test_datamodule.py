@@ -460,3 +460,31 @@ def test_a_sequence_without_emission_emits_nothing_unless_emission_is_required(r
         FrameDataset([Sequence(root / "seq_a")], keys, scale=2.0, preprocessing=Preprocessing(emission=True))
     with pytest.raises(ValueError, match="emission must be true, false or auto"):
         Preprocessing(emission="yes")
+
+
+def test_the_test_splits_noise_ceilings_are_read_from_the_records_and_logged_only_when_they_apply(tmp_path):
+    from types import SimpleNamespace
+
+    from wdss.data.tonemap import ToneMap
+    from wdss.train import noise_ceiling_metrics
+
+    for name, noise in (
+        ("a", {"ceiling_psnr_db": 40.0, "frames": [1, 2, 3]}),
+        ("b", {"ceiling_psnr_db": 44.0, "frames": [1]}),
+    ):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "sequence.json").write_text(json.dumps({"name": name, "noise": noise}))
+    (tmp_path / "c").mkdir()
+    (tmp_path / "c" / "sequence.json").write_text(json.dumps({"name": "c"}))
+    dm = SceneDataModule(tmp_path, {"test": ["a", "b"], "val": ["c"]}, ["lr", "target"])
+    assert dm.noise_ceilings("test") == {"a": (40.0, 3), "b": (44.0, 1)} and dm.noise_ceilings("val") == {}
+    module = SimpleNamespace(tone=ToneMap("hable"))
+    # weighted by the frames each ceiling was measured on: (3 x 40 + 44) / 4
+    assert noise_ceiling_metrics(module, dm) == {
+        "test/noise_ceiling_a": 40.0,
+        "test/noise_ceiling_b": 44.0,
+        "test/noise_ceiling": 41.0,
+    }
+    partial = SceneDataModule(tmp_path, {"test": ["a", "c"]}, ["lr", "target"])
+    assert noise_ceiling_metrics(module, partial) == {"test/noise_ceiling_a": 40.0}  # no mean over part of the split
+    assert noise_ceiling_metrics(SimpleNamespace(tone=ToneMap("hable", "auto")), dm) == {}  # measured at exposure 10

@@ -220,3 +220,16 @@ def test_bench_noise_re_renders_the_targets_exactly_with_their_seed_and_measures
     assert 10.0 < other < same - 20.0  # 2 spp without a denoiser: plainly noisy
     recorded = json.loads((folder / "sequence.json").read_text())["noise"]
     assert recorded["frames"] == [1] and abs(recorded["ceiling_psnr_db"] - other) < 0.01
+
+
+def test_a_render_with_noise_ceiling_records_what_bench_noise_measures_and_keeps_it_on_resume(tmp_path):
+    from wdss.bench import bench_noise
+
+    kwargs = dict(frames=1, resolution=SIZE, scales=(2,), samples=2, denoise=False, spec=controlled_scene())
+    folder = render_sequence(tmp_path, "seq", 7, noise_ceiling=True, **kwargs)
+    recorded = json.loads((folder / "sequence.json").read_text())["noise"]
+    assert recorded["frames"] == [1]  # the scored frames: frame 0 is only history
+    measured = float(bench_noise([str(folder)], [1], 1, record=False).columns[3]._cells[0])
+    assert 10.0 < recorded["ceiling_psnr_db"] < 60.0 and abs(recorded["ceiling_psnr_db"] - measured) < 0.01
+    render_sequence(tmp_path, "seq", 7, noise_ceiling=True, **kwargs)  # resumed: measured once
+    assert json.loads((folder / "sequence.json").read_text())["noise"] == recorded

@@ -213,6 +213,19 @@ class SceneDataModule(L.LightningDataModule):
                     "rendered again on first use (or: make data)"
                 )
 
+    def noise_ceilings(self, split: str = "test") -> dict[str, tuple[float, int]]:
+        """The targets' noise ceiling each sequence of ``split`` records (``sequence.json`` ``noise``, measured by
+        :mod:`wdss.render.noise`: the PSNR a perfect method would score against them, Hable at exposure 10) and
+        over how many frames; sequences without one are left out."""
+        names, _ = self.splits.get(split, ([], {}))
+        ceilings = {}
+        for name in names:
+            sidecar = self.root / name / "sequence.json"
+            noise = json.loads(sidecar.read_text()).get("noise") if sidecar.is_file() else None
+            if noise and "ceiling_psnr_db" in noise:
+                ceilings[name] = (float(noise["ceiling_psnr_db"]), len(noise.get("frames") or [1]))
+        return ceilings
+
     def _sequences(self, split: str, keys: Iterable[str]) -> tuple[list, dict[str, tuple[int, int]]]:
         if split not in self.splits:
             raise SceneError(f"data.splits has no {split!r} split")

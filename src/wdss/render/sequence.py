@@ -125,6 +125,7 @@ def render_sequence(
     scene: str | Path | None = None,
     camera: str = "auto",
     lighting: str = "auto",
+    noise_ceiling: bool = False,
     progress: Progress | None = None,
     spec: SceneSpec | None = None,
 ) -> Path:
@@ -134,7 +135,9 @@ def render_sequence(
     ``scene`` framed by ``camera`` and lit as ``lighting`` says (:mod:`wdss.render.scene_file`; ``seed``
     then seeds the fitted camera path and the added lighting). ``exposure``: the factor every frame's
     radiance is multiplied by, or ``"auto"``: chosen from probe renders by :func:`wdss.render.exposure.auto_exposure`
-    and recorded in ``sequence.json`` (so a resumed render applies the same factor).
+    and recorded in ``sequence.json`` (so a resumed render applies the same factor). ``noise_ceiling``: once every
+    frame is rendered, re-render the scored frames (1..frames) with another seed and record the targets' noise
+    ceiling in ``sequence.json`` (:mod:`wdss.render.noise`; kept when the sequence is resumed).
     """
     from wdss.render.convert import to_buffers
 
@@ -179,6 +182,7 @@ def render_sequence(
             "remove it or render into another folder"
         )
     todo = [f for f in range(frames + 1) if not all(p.exists() for p in frame_files(folder, f, heights))]
+    measure = noise_ceiling and not (previous_meta and "noise" in previous_meta)
     task = progress.add_task(name, total=frames + 1, completed=frames + 1 - len(todo)) if progress else None
     blender_scene: Any = None
     if scene_path is None:
@@ -187,7 +191,7 @@ def render_sequence(
         poses = {f: camera_pose(spec.camera, f) for f in range(-1, frames + 1)}
         description = spec.to_dict()
     else:
-        if previous_meta and not todo:
+        if previous_meta and not todo and not measure:
             return folder
         from wdss.render.scene_file import FileScene
 
@@ -235,7 +239,7 @@ def render_sequence(
     _write_json(sidecar, meta)
     for stale in folder.rglob(".*.tmp"):  # a render killed while writing leaves only its temporary file
         stale.unlink()
-    if not todo:
+    if not todo and not measure:
         return folder
     if blender_scene is None:
         from wdss.render.blender import BlenderScene
@@ -266,6 +270,11 @@ def render_sequence(
         _write_json(sidecar, meta)
         if progress is not None:
             progress.advance(task)
+    if measure:
+        from wdss.render.noise import measure_noise
+
+        meta["noise"] = measure_noise(scene, folder, meta["exposure"], range(1, frames + 1))
+        _write_json(sidecar, meta)
     return folder
 
 
