@@ -488,3 +488,23 @@ def test_the_test_splits_noise_ceilings_are_read_from_the_records_and_logged_onl
     partial = SceneDataModule(tmp_path, {"test": ["a", "c"]}, ["lr", "target"])
     assert noise_ceiling_metrics(module, partial) == {"test/noise_ceiling_a": 40.0}  # no mean over part of the split
     assert noise_ceiling_metrics(SimpleNamespace(tone=ToneMap("hable", "auto")), dm) == {}  # measured at exposure 10
+
+
+def test_prepare_data_resumes_a_render_stopped_part_way_and_never_renders_into_other_frames(tmp_path):
+    calls = []
+    root = tmp_path / "made"
+    write_sequence(root / "seq_a", frames=(0, 1, 2), size=(8, 8), scales=())
+    meta = {"settings": {"frames": 2, "passes": ["emission"]}, "sampling": {}, "render_seconds": {"0": 1, "1": 1}}
+    (root / "seq_a" / "sequence.json").write_text(json.dumps(meta))
+    dm = SceneDataModule(
+        root, {"train": ["seq_a"], "val": ["seq_b"]}, ["target"], patch_size=None, prepare=calls.append
+    )
+    dm.prepare_data()  # seq_a lacks frame 2's render, seq_b was never reached
+    assert calls == [root]
+    meta["render_seconds"]["2"] = 1
+    (root / "seq_a" / "sequence.json").write_text(json.dumps(meta))
+    SceneDataModule(root, {"train": ["seq_a"]}, ["target"], patch_size=None, prepare=calls.append).prepare_data()
+    assert calls == [root]  # finished: nothing to do
+    write_sequence(tmp_path / "mine" / "seq_a", frames=(1, 2), size=(8, 8), scales=())  # no wdss render record
+    SceneDataModule(tmp_path / "mine", {"train": ["seq_a", "typo"]}, ["target"], prepare=calls.append).prepare_data()
+    assert calls == [root]

@@ -114,7 +114,8 @@ class SceneDataModule(L.LightningDataModule):
     ``test_lr_source`` the test split's (``None``: the same), so that a model trained on one convention is tested
     on another.
     ``patches_per_frame`` random patches of every training frame make one epoch. ``prepare`` is called with
-    ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset).
+    ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset), or when it holds
+    a wdss render (``sequence.json`` files) that was stopped before every sequence of the splits was finished.
     """
 
     def __init__(
@@ -205,13 +206,29 @@ class SceneDataModule(L.LightningDataModule):
             return
         from wdss.render.sequence import stale_render
 
+        rendered = {}
         for sidecar in sorted(self.root.glob("*/sequence.json")):  # rendered on first use by an older wdss?
-            why = stale_render(json.loads(sidecar.read_text()))
+            meta = json.loads(sidecar.read_text())
+            why = stale_render(meta)
             if why:
                 raise SceneError(
                     f"{sidecar.parent} was rendered by an earlier wdss: {why}. Remove {self.root} and it is "
                     "rendered again on first use (or: make data)"
                 )
+            rendered[sidecar.parent.name] = meta
+        # A render of this dataset that was stopped part-way (wdss renders here, and a sequence of the splits is
+        # missing or unfinished) resumes; a folder of other frames is never rendered into.
+        names = {name for names, _ in self.splits.values() for name in names}
+        unfinished = sorted(
+            name
+            for name in names
+            if name not in rendered
+            or len(rendered[name].get("render_seconds") or {})
+            < int((rendered[name].get("settings") or {}).get("frames", -1)) + 1
+        )
+        if rendered and unfinished:
+            print(f"wdss: {self.root}: resuming the render of {', '.join(unfinished)}", flush=True)
+            self.prepare(self.root)
 
     def noise_ceilings(self, split: str = "test") -> dict[str, tuple[float, int]]:
         """The targets' noise ceiling each sequence of ``split`` records (``sequence.json`` ``noise``, measured by
