@@ -340,7 +340,8 @@ def main(cfg: DictConfig) -> float | None:
     output_dir = cfg.paths.output_dir
     print(f"wdss.train: run {run_name(cfg)!r} done; outputs in {output_dir}")
     print(f"  MLflow: {OmegaConf.select(cfg, 'logger.tracking_uri')} -- browse with `make ui`")
-    for key in sorted(k for k in metrics if k.startswith(("test/psnr", "test/ssim", "test/flip", "bench/"))):
+    shown = ("test/psnr", "test/ssim", "test/flip", "bench/")
+    for key in sorted(k for k in metrics if k.startswith(shown) or k == "test/noise_ceiling"):
         print(f"  {key} = {metrics[key]:.4g}")
     return metrics.get("val/psnr")
 
