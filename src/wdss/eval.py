@@ -133,15 +133,12 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
 
         callbacks.append(SequenceVideos(Path(str(cfg.paths.output_dir)) / "videos"))
     trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks, enable_checkpointing=False)
-    from wdss.train import _bench, noise_ceiling_metrics
+    from wdss.train import _bench, log_noise_ceilings
 
     try:
         trainer.test(module, datamodule=datamodule, verbose=sys.stdout.isatty())  # the metrics are printed below
         metrics = {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")}
-        ceilings = noise_ceiling_metrics(module, datamodule)
-        if ceilings:
-            logger.log_metrics(ceilings)
-        metrics.update(ceilings)
+        metrics.update(log_noise_ceilings(module, datamodule, logger))
         metrics.update(_bench(cfg, module, logger))
     except BaseException:
         logger.finalize("FAILED")  # the evaluation's own run; the training run is never touched

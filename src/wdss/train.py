@@ -31,7 +31,7 @@ from wdss.progress_bar import progress_bar
 from wdss.targets import TargetRefused, check_targets, instantiate
 from wdss.tracking import RUN_ID_FILE, ensure_experiment, prepare_store, reap_dead_runs, run_name, run_tags
 
-__all__ = ["ConfigError", "main", "noise_ceiling_metrics", "train", "validate"]
+__all__ = ["ConfigError", "log_noise_ceilings", "main", "train", "validate"]
 
 
 class ConfigError(ValueError):
@@ -252,10 +252,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
             )
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("test/")})
             if trainer.is_global_zero:
-                ceilings = noise_ceiling_metrics(module, datamodule)
-                if ceilings:
-                    logger.log_metrics(ceilings)
-                metrics.update(ceilings)
+                metrics.update(log_noise_ceilings(module, datamodule, logger))
         if trainer.is_global_zero:
             metrics.update(_bench(cfg, module, logger))
     except BaseException as error:
@@ -269,21 +266,26 @@ def train(cfg: DictConfig) -> dict[str, float]:
     return metrics
 
 
-def noise_ceiling_metrics(module: Any, datamodule: Any) -> dict[str, float]:
-    """The test sequences' recorded noise ceilings as metrics: ``test/noise_ceiling_<sequence>`` and, when every test
-    sequence has one, ``test/noise_ceiling`` (their mean weighted by frames): the PSNR no method can exceed on
-    these targets. Only where the metrics' display transform is the one they were measured with (Hable, exposure 10).
-    """
+def log_noise_ceilings(module: Any, datamodule: Any, logger: Any) -> dict[str, float]:
+    """Log and return the test sequences' recorded noise ceilings: ``test/noise_ceiling_<sequence>`` and, when every
+    test sequence has one, ``test/noise_ceiling`` (their mean weighted by frames): the PSNR no method can exceed on
+    these targets. Only where the metrics' display transform is the one they were measured with (Hable at its
+    default exposure, :mod:`wdss.render.noise`)."""
     from wdss.data.datamodule import SceneDataModule
+    from wdss.data.tonemap import DEFAULT_EXPOSURE
 
     tone = module.tone
-    if not isinstance(datamodule, SceneDataModule) or tone.name != "hable" or tone.exposure not in (None, 10, 10.0):
+    if not isinstance(datamodule, SceneDataModule) or tone.name != "hable":
+        return {}
+    if tone.exposure not in (None, DEFAULT_EXPOSURE["hable"]):
         return {}
     ceilings = datamodule.noise_ceilings("test")
     metrics = {f"test/noise_ceiling_{name}": value for name, (value, _) in ceilings.items()}
     if ceilings and len(ceilings) == len(datamodule.splits["test"][0]):
         frames = sum(n for _, n in ceilings.values())
         metrics["test/noise_ceiling"] = sum(value * n for value, n in ceilings.values()) / frames
+    if metrics and logger is not None:
+        logger.log_metrics(metrics)
     return metrics
 
 

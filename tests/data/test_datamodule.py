@@ -466,7 +466,7 @@ def test_the_test_splits_noise_ceilings_are_read_from_the_records_and_logged_onl
     from types import SimpleNamespace
 
     from wdss.data.tonemap import ToneMap
-    from wdss.train import noise_ceiling_metrics
+    from wdss.train import log_noise_ceilings
 
     for name, noise in (
         ("a", {"ceiling_psnr_db": 40.0, "frames": [1, 2, 3]}),
@@ -480,14 +480,20 @@ def test_the_test_splits_noise_ceilings_are_read_from_the_records_and_logged_onl
     assert dm.noise_ceilings("test") == {"a": (40.0, 3), "b": (44.0, 1)} and dm.noise_ceilings("val") == {}
     module = SimpleNamespace(tone=ToneMap("hable"))
     # weighted by the frames each ceiling was measured on: (3 x 40 + 44) / 4
-    assert noise_ceiling_metrics(module, dm) == {
-        "test/noise_ceiling_a": 40.0,
-        "test/noise_ceiling_b": 44.0,
-        "test/noise_ceiling": 41.0,
-    }
+    logged = []
+    logger = SimpleNamespace(log_metrics=logged.append)
+    assert (
+        log_noise_ceilings(module, dm, logger)
+        == logged[0]
+        == {
+            "test/noise_ceiling_a": 40.0,
+            "test/noise_ceiling_b": 44.0,
+            "test/noise_ceiling": 41.0,
+        }
+    )
     partial = SceneDataModule(tmp_path, {"test": ["a", "c"]}, ["lr", "target"])
-    assert noise_ceiling_metrics(module, partial) == {"test/noise_ceiling_a": 40.0}  # no mean over part of the split
-    assert noise_ceiling_metrics(SimpleNamespace(tone=ToneMap("hable", "auto")), dm) == {}  # measured at exposure 10
+    assert log_noise_ceilings(module, partial, None) == {"test/noise_ceiling_a": 40.0}  # no mean over part of the split
+    assert log_noise_ceilings(SimpleNamespace(tone=ToneMap("hable", "auto")), dm, None) == {}  # measured at exposure 10
 
 
 def test_prepare_data_resumes_a_render_stopped_part_way_and_never_renders_into_other_frames(tmp_path):

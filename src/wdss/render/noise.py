@@ -10,6 +10,7 @@ targets: the ceiling of every PSNR measured on them. A sequence records it in it
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence as Frames
 from pathlib import Path
 from typing import Any
@@ -27,10 +28,8 @@ HOW = "PSNR(target, re-render with another Cycles seed) + 10 log10 2, Hable at e
 def measure_noise(scene: Any, folder: str | Path, exposure: float, frames: Frames[int], noise_seed: int = 1) -> dict:
     """Re-render ``frames`` of the sequence in ``folder`` with ``scene`` (a :class:`wdss.render.blender.BlenderScene`
     or a scene file's, set up as the dataset rendered it) and return its ``noise`` record: ``ceiling_psnr_db``,
-    ``mse`` (tone-mapped, target vs re-render), ``frames``, ``seconds`` per frame and how it was measured. The
-    scene's Cycles seed is restored afterwards."""
-    import time
-
+    ``mse`` (tone-mapped, target vs re-render), ``frames``, ``noise_seed``, ``seconds_per_frame`` and how it was
+    measured. The scene's Cycles seed is restored afterwards."""
     from wdss.data.layouts import Sequence
     from wdss.data.tonemap import hable
 
