@@ -102,8 +102,9 @@ class InferenceGraph(nn.Module):
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        """The graph's input names, in the order of the network's forward, the BRDF factor last."""
-        wanted = set(self.net.inputs) | {"scale"}
+        """The graph's input names, in the order of the network's forward, the BRDF factor last. A graph takes LR
+        frames shaded at their pixel centres: ``lr_jitter`` is not among them (its path is a per-sample gather)."""
+        wanted = (set(self.net.inputs) - {"lr_jitter"}) | {"scale"}
         names = [k for k in self.net_args if k in wanted]
         return (*names, "brdf") if "brdf" not in names else tuple(names)
 

@@ -26,6 +26,7 @@ def batch(n: int = 2, size: tuple[int, int] = (16, 20), scale: float = 2.0, seed
         "brdf": brdf,
         "target": irradiance * brdf,
         "scale": torch.full((n,), scale),
+        "lr_jitter": torch.zeros(n, 2),  # the LR pixels shaded at their centres
         "sequence": ["synthetic"] * n,
         "frame": torch.arange(n),
     }

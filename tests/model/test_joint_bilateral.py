@@ -163,7 +163,7 @@ def test_baseline_runs_through_the_module_without_parameters():
     module = SuperResolutionModule(net_config, flip=False, trainable=False)
     assert not module.trainable and module.configure_optimizers() is None and module.temporal == "none"
     # It upsamples demodulated irradiance: the emission the data takes out of the LR comes back at HR.
-    assert set(module.inputs) == {"lr", "gbuffer", "lr_guide", "brdf", "target", "emission"}
+    assert set(module.inputs) == {"lr", "gbuffer", "lr_guide", "lr_jitter", "brdf", "target", "emission"}
     data = batch(size=(15, 21), scale=3.0)
     out = module(data)
     expected = joint_bilateral_upsample(data["lr"], data["gbuffer"], sigma_depth=0.05) * data["brdf"]
@@ -181,12 +181,12 @@ def test_the_colour_space_variant_filters_the_lr_colour():
     torch.manual_seed(0)
     data = batch(size=(15, 21), scale=3.0)
     model = JointBilateralUpsample(demodulated=False)
-    assert model.inputs == ("lr_color", "gbuffer", "brdf", "lr_guide")
+    assert model.inputs == ("lr_color", "gbuffer", "brdf", "lr_guide", "lr_jitter")
     out = model(gbuffer=data["gbuffer"], lr_color=data["lr_color"], brdf=data["brdf"])["irradiance"]
     torch.testing.assert_close(out * data["brdf"], joint_bilateral_upsample(data["lr_color"], data["gbuffer"]))
     with pytest.raises(ValueError, match="demodulated=false needs lr_color and the HR brdf"):
         model(gbuffer=data["gbuffer"], lr_color=data["lr_color"])
-    assert JointBilateralUpsample().inputs == ("lr", "gbuffer", "lr_guide")  # the demodulated default needs no F
+    assert JointBilateralUpsample().inputs == ("lr", "gbuffer", "lr_guide", "lr_jitter")  # demodulated: no F
     module = SuperResolutionModule(
         {"_target_": "wdss.model.joint_bilateral.JointBilateralUpsample", "demodulated": False}
     )

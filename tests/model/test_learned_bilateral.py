@@ -122,7 +122,7 @@ def test_with_tap_brdf_it_starts_as_joint_bilateral_and_spans_the_colour_space_k
     torch.manual_seed(0)
     data = batch(size=size, scale=scale)
     model = LearnedBilateralUpsample(tap_brdf=True)
-    assert model.inputs == ("lr", "gbuffer", "lr_guide", "brdf", "lr_brdf")
+    assert model.inputs == ("lr", "gbuffer", "lr_guide", "lr_jitter", "brdf", "lr_brdf")
     f = dict(brdf=data["brdf"], lr_brdf=point_sample(data["brdf"], data["lr"].shape[-2:]))  # as data/mini's LR
     start = model(data["lr"], data["gbuffer"], **f)["irradiance"]
     torch.testing.assert_close(start, joint_bilateral_upsample(data["lr"], data["gbuffer"]), atol=1e-5, rtol=1e-5)

@@ -233,3 +233,33 @@ def test_a_render_with_noise_ceiling_records_what_bench_noise_measures_and_keeps
     assert 10.0 < recorded["ceiling_psnr_db"] < 60.0 and abs(recorded["ceiling_psnr_db"] - measured) < 0.01
     render_sequence(tmp_path, "seq", 7, noise_ceiling=True, **kwargs)  # resumed: measured once
     assert json.loads((folder / "sequence.json").read_text())["noise"] == recorded
+
+
+def test_a_jittered_lr_render_is_shaded_at_its_pixels_plus_the_jitter_and_records_it(tmp_path):
+    """At 2x, LR pixel i shaded at i + 0.5 + 0.25 lies on HR pixel 2i + 1's centre, and at i + 0.5 - 0.25 on
+    2i's: the jittered LR G-buffer is then exactly the HR one point-sampled there (the lens shift's sign and unit)."""
+    from wdss.render.blender import BlenderScene
+
+    scene = BlenderScene(controlled_scene(), samples=1, denoise=False, filter_width=0.01)
+    width, height = SIZE
+    hr = scene.render(1, width, height)["Depth"][0]
+    for jitter, first in (((0.25, 0.25), 1), ((-0.25, -0.25), 0), ((0.25, -0.25), None)):
+        lr = scene.render(1, width // 2, height // 2, jitter=jitter)["Depth"][0]
+        # (0.25, -0.25): x on odd HR columns, y on even rows
+        expected = hr[0::2, 1::2] if first is None else hr[first::2, first::2]
+        same = np.isclose(lr, expected, rtol=1e-4, atol=1e-4).mean()
+        assert same > 0.99, (jitter, same)  # a silhouette pixel may flip with the filter's 0.01-pixel spread
+    centred = scene.render(1, width // 2, height // 2)["Depth"][0]
+    assert np.isclose(centred, hr[1::2, 1::2], rtol=1e-4, atol=1e-4).mean() < 0.9  # between HR centres: not a copy
+
+    folder = render_sequence(
+        tmp_path, "jittered", 7, frames=2, resolution=SIZE, scales=(2,), lr_mode="jittered", samples=1,
+        denoise=False, spec=controlled_scene(),
+    )  # fmt: skip
+    meta = json.loads((folder / "sequence.json").read_text())
+    assert meta["sampling"]["lr"]["16P"]["lr"] == "native" and "Halton" in meta["sampling"]["lr"]["16P"]["jitter"]
+    from wdss.data.sampling import halton_jitter
+
+    assert [f["lr_jitter"] for f in meta["frames"]] == [list(halton_jitter(f)) for f in range(3)]
+    seq = Sequence(folder)
+    assert seq.lr_jitter(2) == halton_jitter(2)

@@ -25,7 +25,7 @@ from torch.utils.data import Dataset, Sampler
 
 from wdss.data.layouts import BUFFERS, SceneError, Sequence
 from wdss.data.preprocess import GBUFFER_STACK, LR_GUIDE, Preprocessing, RawBatch, brdf_of, build_batch
-from wdss.data.sampling import flip, lr_size, scale_matches
+from wdss.data.sampling import flip, flip_jitter, lr_size, scale_matches
 
 __all__ = [
     "BATCH_KEYS",
@@ -51,6 +51,7 @@ BATCH_KEYS = (
     "lr_color",
     "lr_brdf",
     "lr_guide",
+    "lr_jitter",
     "gbuffer",
     "spatial_mask",
     "history",
@@ -350,6 +351,9 @@ class FrameDataset(Dataset):
         if self.flips:
             flips = (bool(torch.rand((), generator=rng) < 0.5), bool(torch.rand((), generator=rng) < 0.5))
         for step in steps:
+            # Where the LR pixels were shaded: a jittered native frame's offset; point samples are taken here.
+            jitter = torch.tensor(seq.lr_jitter(step["frame"]) if lr_height else (0.0, 0.0), dtype=torch.float32)
+            step["lr_jitter"] = flip_jitter(jitter, horizontal=flips[0], vertical=flips[1])
             if any(flips):  # margins are symmetric: a mirrored window with its margin is the mirrored margin's window
                 for role in ROLES:
                     camera = seq.camera(step["frame"] - _OFFSET[role])
@@ -456,6 +460,7 @@ class Collate:
             sampled={low: tuple(sorted(need[low])) for low in _HR_OF if need[low] and not roles[low]},
             sequence=[s["sequence"] for s in samples],
             frame=torch.tensor([s["frame"] for s in samples]),
+            lr_jitter=torch.stack([s.get("lr_jitter", torch.zeros(2)) for s in samples]),
         )
 
 

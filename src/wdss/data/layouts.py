@@ -32,6 +32,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -49,6 +50,7 @@ __all__ = [
     "SceneError",
     "SceneLayout",
     "Sequence",
+    "Sidecar",
     "UnrealLayout",
     "discover_sequences",
 ]
@@ -334,7 +336,8 @@ class Sequence:
         self._shapes: dict[int, tuple[int, int]] = {}
         self.cache: FrameCache | None = None  # decoded frames kept between reads (the data module sets one)
         # At discovery: a malformed sidecar fails before training starts.
-        self._cameras, self.frame_rate = self._read_sidecar()
+        self._sidecar = self._read_sidecar()
+        self.frame_rate = self._sidecar.frame_rate
 
     def __repr__(self) -> str:
         return (
@@ -356,11 +359,15 @@ class Sequence:
 
     def camera(self, frame: int) -> torch.Tensor | None:
         """The 3x3 camera-to-world rotation of ``frame`` from the sidecar ``sequence.json``, if there is one."""
-        return self._cameras.get(frame)
+        return self._sidecar.cameras.get(frame)
 
-    def _read_sidecar(self) -> tuple[dict[int, torch.Tensor], float]:
+    def lr_jitter(self, frame: int) -> tuple[float, float]:
+        """Where ``frame``'s native LR pixels were shaded, from their centres (LR pixels, x right, y down)."""
+        return self._sidecar.lr_jitter.get(frame, (0.0, 0.0))
+
+    def _read_sidecar(self) -> Sidecar:
         if not self.source.has("sequence.json"):
-            return {}, DEFAULT_FRAME_RATE
+            return Sidecar({})
         return parse_sidecar(self.source.read_bytes("sequence.json"), self.source.describe("sequence.json"))
 
     def read(self, frame: int, height: int, buffers: Iterable[str], *, sanitize: bool = False) -> dict[str, np.ndarray]:
@@ -476,29 +483,43 @@ class Sequence:
             )
 
 
-def parse_sidecar(raw: bytes, where: str) -> tuple[dict[int, torch.Tensor], float]:
-    """Camera rotations by frame and the frame rate (``fps``, default :data:`DEFAULT_FRAME_RATE`) of a
-    ``sequence.json``; ``where`` names it in errors."""
+class Sidecar(NamedTuple):
+    """What a ``sequence.json`` tells the loader: camera rotations and LR sample offsets by frame, the frame rate."""
+
+    cameras: dict[int, torch.Tensor]
+    frame_rate: float = DEFAULT_FRAME_RATE
+    lr_jitter: dict[int, tuple[float, float]] = {}
+
+
+def parse_sidecar(raw: bytes, where: str) -> Sidecar:
+    """Camera rotations by frame, the frame rate (``fps``, default :data:`DEFAULT_FRAME_RATE`) and the native LR
+    frames' sub-pixel jitter by frame (``lr_jitter``: ``[x, y]`` LR pixels, x right, y down, where the LR was
+    rendered jittered) of a ``sequence.json``; ``where`` names it in errors."""
     try:
         meta = json.loads(raw)
     except ValueError as err:  # JSONDecodeError and UnicodeDecodeError
         raise SceneError(f"{where} is not valid JSON: {err}") from err
-    cameras = {}
+    cameras, jitter = {}, {}
     try:
         for entry in meta.get("frames", []):
             matrix = torch.tensor(entry["camera_to_world"], dtype=torch.float32)
             if matrix.ndim != 2 or min(matrix.shape) < 3:
                 raise ValueError(f"camera_to_world of frame {entry['frame']} has shape {list(matrix.shape)}")
             cameras[int(entry["frame"])] = matrix[:3, :3]
+            if "lr_jitter" in entry:
+                x, y = (float(v) for v in entry["lr_jitter"])
+                if not (abs(x) <= 0.5 and abs(y) <= 0.5):  # NaN fails too
+                    raise ValueError(f"lr_jitter of frame {entry['frame']} is {[x, y]}, not within half a pixel")
+                jitter[int(entry["frame"])] = (x, y)
     except (AttributeError, KeyError, TypeError, ValueError, RuntimeError) as err:
         raise SceneError(
             f"{where}: malformed 'frames' ({type(err).__name__}: {err}); expected a list of "
-            "{frame: N, camera_to_world: 4x4 matrix}"
+            "{frame: N, camera_to_world: 4x4 matrix[, lr_jitter: [x, y]]}"
         ) from err
     fps = meta.get("fps", DEFAULT_FRAME_RATE)
     if isinstance(fps, bool) or not isinstance(fps, int | float) or not 0 < fps <= 1000:
         raise SceneError(f"{where}: 'fps' must be a number of frames per second, got {fps!r}")
-    return cameras, float(fps)
+    return Sidecar(cameras, float(fps), jitter)
 
 
 def discover_sequences(root: str | Path, names: Iterable[str] | None = None, layout: str = "auto") -> list[Sequence]:

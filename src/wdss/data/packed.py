@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from wdss.data.layouts import BUFFERS, DEFAULT_FRAME_RATE, SceneError, parse_sidecar
+from wdss.data.layouts import BUFFERS, SceneError, Sidecar, parse_sidecar
 from wdss.data.preprocess import depth_range
 
 __all__ = ["FORMAT", "VERSION", "PackedSequence", "discover_packed", "far_key", "is_packed"]
@@ -129,9 +129,8 @@ class PackedSequence:
                     f"{expected} bytes: it is truncated or corrupt; {repack_hint(self.folder)}"
                 )
         sidecar = self.folder / "sequence.json"
-        self._cameras, self.frame_rate = (
-            parse_sidecar(sidecar.read_bytes(), str(sidecar)) if sidecar.is_file() else ({}, DEFAULT_FRAME_RATE)
-        )
+        self._sidecar = parse_sidecar(sidecar.read_bytes(), str(sidecar)) if sidecar.is_file() else Sidecar({})
+        self.frame_rate = self._sidecar.frame_rate
 
     @staticmethod
     def _check(index: dict) -> None:
@@ -167,7 +166,10 @@ class PackedSequence:
         return frame is None or str(frame) in res["packed"]
 
     def camera(self, frame: int) -> torch.Tensor | None:
-        return self._cameras.get(frame)
+        return self._sidecar.cameras.get(frame)
+
+    def lr_jitter(self, frame: int) -> tuple[float, float]:
+        return self._sidecar.lr_jitter.get(frame, (0.0, 0.0))
 
     def shape(self, height: int) -> tuple[int, int]:
         h, w = self._res[height]["shape"]

@@ -140,10 +140,13 @@ class RawBatch:
     sampled: dict[str, tuple[str, ...]]
     sequence: list[str]
     frame: Tensor
+    lr_jitter: Tensor | None = None  # (N, 2): where each sample's LR pixels were shaded (None: at their centres)
 
     def _apply(self, fn) -> RawBatch:
         roles = {role: {k: fn(v) for k, v in buffers.items()} for role, buffers in self.roles.items()}
-        return replace(self, roles=roles, ranges={k: fn(v) for k, v in self.ranges.items()}, frame=fn(self.frame))
+        jitter = None if self.lr_jitter is None else fn(self.lr_jitter)
+        ranges = {k: fn(v) for k, v in self.ranges.items()}
+        return replace(self, roles=roles, ranges=ranges, frame=fn(self.frame), lr_jitter=jitter)
 
     def to(self, device: torch.device | str, non_blocking: bool = False) -> RawBatch:
         return self._apply(lambda t: t.to(device, non_blocking=non_blocking))
@@ -170,6 +173,9 @@ class RawBatch:
                     n: point_sample(_crop(roles[high][n], margin, height, width), size) for n in self.sampled[low]
                 }
         batch = build_batch(set(self.keys), roles, prep, self.margins)
+        if "lr_jitter" in self.keys:
+            jitter = self.lr_jitter if self.lr_jitter is not None else torch.zeros(len(self), 2)
+            batch["lr_jitter"] = jitter.to(self.frame.device, torch.float32)
         batch["scale"] = torch.full((len(self),), self.scale, device=self.frame.device)
         batch["sequence"] = list(self.sequence)
         batch["frame"] = self.frame

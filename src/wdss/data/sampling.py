@@ -6,6 +6,10 @@ low-resolution frame at scale ``s`` of a ``H x W`` frame has ``h = round(H / s)`
 covers the same extent, so its effective scale is ``H / h`` per axis (``s`` exactly when ``s`` divides
 ``H``). Low-resolution pixel ``i`` is the high-resolution pixel under its centre: ``floor((i + 0.5) H / h)``
 (torch's ``nearest-exact``), i.e. point sampling as a rasteriser at the lower resolution would do.
+
+An engine that jitters its LR frame shades pixel ``i`` at ``i + 0.5 + j`` LR pixels instead (``j``: the frame's
+sub-pixel jitter, x right and y down, in ``[-0.5, 0.5)``); :func:`halton_jitter` is the sequence wdss renders with,
+and the batch key ``lr_jitter`` carries each sample's (flipped with the image: :func:`flip_jitter`).
 """
 
 from __future__ import annotations
@@ -15,7 +19,20 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-__all__ = ["crop", "flip", "lr_size", "point_sample", "scale_matches"]
+__all__ = [
+    "JITTER_PHASES",
+    "crop",
+    "flip",
+    "flip_jitter",
+    "halton_jitter",
+    "lr_size",
+    "point_sample",
+    "scale_matches",
+    "upsample",
+]
+
+# Frames in one cycle of the jitter sequence (engines use 8 or 16 phases of Halton(2, 3)).
+JITTER_PHASES = 8
 
 
 def lr_size(height: int, width: int, scale: float) -> tuple[int, int]:
@@ -30,6 +47,45 @@ def point_sample(hr: Tensor, size: tuple[int, int]) -> Tensor:
     if tuple(size) == tuple(hr.shape[-2:]):
         return hr
     return F.interpolate(hr, size=tuple(size), mode="nearest-exact")
+
+
+def _radical_inverse(index: int, base: int) -> float:
+    """The van der Corput radical inverse of ``index`` in ``base``: its digits mirrored about the point."""
+    result, digit = 0.0, 1.0 / base
+    while index:
+        index, rest = divmod(index, base)
+        result += rest * digit
+        digit /= base
+    return result
+
+
+def halton_jitter(frame: int, phases: int = JITTER_PHASES) -> tuple[float, float]:
+    """The sub-pixel jitter ``(x, y)`` of ``frame`` in LR pixels, in ``[-0.5, 0.5)``: Halton(2, 3) point
+    ``1 + frame mod phases`` minus one half, as engines jitter their projection (TAA, DLSS, FSR)."""
+    index = 1 + frame % phases
+    return _radical_inverse(index, 2) - 0.5, _radical_inverse(index, 3) - 0.5
+
+
+def flip_jitter(jitter: Tensor, *, horizontal: bool, vertical: bool) -> Tensor:
+    """A ``(..., 2)`` jitter of a mirrored frame: a sample right of its pixel centre lies left of it once mirrored."""
+    sign = torch.tensor([-1.0 if horizontal else 1.0, -1.0 if vertical else 1.0], dtype=jitter.dtype)
+    return jitter * sign.to(jitter.device)
+
+
+def upsample(x: Tensor, size: tuple[int, int], mode: str = "bilinear", jitter: Tensor | None = None) -> Tensor:
+    """``x`` (N, C, h, w) interpolated (``bilinear`` or ``bicubic``) onto an ``H x W`` grid, cell centres aligned,
+    its pixels taken as shaded where ``jitter`` (N, 2; x, y in LR pixels) says; ``None`` or zero: at their centres
+    (``F.interpolate``). Beyond the outer samples, the border value."""
+    if jitter is None or (not torch.compiler.is_compiling() and not bool(jitter.any())):
+        return F.interpolate(x, size=tuple(size), mode=mode, align_corners=False)
+    (h, w), (height, width) = x.shape[-2:], size
+    # Normalised grid coordinates (align_corners=False): the HR pixel centres, less each sample's jitter.
+    ys = (2 * torch.arange(height, device=x.device, dtype=x.dtype) + 1) / height - 1
+    xs = (2 * torch.arange(width, device=x.device, dtype=x.dtype) + 1) / width - 1
+    shift = 2 * jitter.to(x.dtype) / torch.tensor([w, h], device=x.device, dtype=x.dtype)  # (N, 2)
+    gx = xs.view(1, 1, width).expand(x.shape[0], height, width) - shift[:, 0].view(-1, 1, 1)
+    gy = ys.view(1, height, 1).expand(x.shape[0], height, width) - shift[:, 1].view(-1, 1, 1)
+    return F.grid_sample(x, torch.stack([gx, gy], -1), mode=mode, padding_mode="border", align_corners=False)
 
 
 def crop(array: np.ndarray, window: tuple[int, int, int, int] | None) -> np.ndarray:

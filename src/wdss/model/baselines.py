@@ -2,13 +2,15 @@
 
 ``bilinear`` and ``bicubic`` upsample the low-resolution colour; ``bilinear_demodulated`` upsamples the
 demodulated irradiance and remodulates it with the high-resolution BRDF, which restores texture detail
-from the G-buffer for free. Upsampling aligns cell centres (``align_corners=False``), as the data does.
+from the G-buffer for free. Upsampling aligns cell centres (``align_corners=False``), as the data does, and
+places a jittered LR frame's pixels where they were shaded (``lr_jitter``).
 """
 
 from __future__ import annotations
 
-import torch.nn.functional as F
 from torch import Tensor, nn
+
+from wdss.data.sampling import upsample
 
 __all__ = ["Upsample"]
 
@@ -25,11 +27,18 @@ class Upsample(nn.Module):
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr",) if self.demodulated else ("lr_color", "brdf")
+        return ("lr", "lr_jitter") if self.demodulated else ("lr_color", "brdf", "lr_jitter")
 
-    def forward(self, brdf: Tensor, lr: Tensor | None = None, lr_color: Tensor | None = None, **_: Tensor) -> dict:
+    def forward(
+        self,
+        brdf: Tensor,
+        lr: Tensor | None = None,
+        lr_color: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
+        **_: Tensor,
+    ) -> dict:
         size = brdf.shape[-2:]
         source = lr if self.demodulated else lr_color
-        up = F.interpolate(source, size=size, mode=self.mode, align_corners=False).clamp_min(0.0)
+        up = upsample(source, size, self.mode, lr_jitter).clamp_min(0.0)
         # Colour baselines return colour / F so that the shared remodulation gives their colour back exactly.
         return {"irradiance": up if self.demodulated else up / brdf, "coefficients": None}

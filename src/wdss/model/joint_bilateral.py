@@ -3,10 +3,11 @@
 A classical, parameter-free baseline (after Kopf et al., "Joint bilateral upsampling", 2007): every
 high-resolution pixel takes a weighted mean of the ``2 radius x 2 radius`` low-resolution pixels around its
 position in low-resolution coordinates (``u = (x + 0.5) w / W - 0.5``, cell centres aligned as in
-:mod:`wdss.data.sampling`). The weight is a separable tent ``max(0, 1 - |u - j| / radius)`` per axis times a
-range term comparing the pixel's depth, normal and albedo with those of the low-resolution pixel: the G-buffer
-the LR colour was shaded with (``lr_guide``, the batch key of that name: a native LR frame's own G-buffer), or,
-without one, the high-resolution G-buffer point-sampled as point-sampled data samples its LR frames:
+:mod:`wdss.data.sampling`, less the frame's ``lr_jitter`` where its LR pixels were shaded off their centres). The
+weight is a separable tent ``max(0, 1 - |u - j| / radius)`` per axis times a range term comparing the pixel's
+depth, normal and albedo with those of the low-resolution pixel: the G-buffer the LR colour was shaded with
+(``lr_guide``, the batch key of that name: a native LR frame's own G-buffer), or, without one, the high-resolution
+G-buffer point-sampled as point-sampled data samples its LR frames:
 
     exp(-dz^2 / (2 sigma_depth^2) - (1 - n.n') / sigma_normal - |da|^2 / (2 sigma_albedo^2))
 
@@ -45,11 +46,15 @@ FALLBACK_WEIGHT = 1e-6
 _MAX_EXPONENT = 30.0
 
 
-def _taps(hr: int, lr: int, radius: int, device: torch.device) -> list[tuple[Tensor, Tensor, Tensor]]:
+def _taps(
+    hr: int, lr: int, radius: int, device: torch.device, jitter: Tensor | None = None
+) -> list[tuple[Tensor, Tensor, Tensor]]:
     """Per tap offset along one axis: the clamped LR index, the tent weight of every HR position, and the HR
-    position's offset from the tap in LR pixels (``u - j``, before clamping)."""
+    position's offset from the tap's sample in LR pixels (``u - j - jitter``, before clamping), each ``(1, hr)``,
+    or ``(N, hr)`` for a per-sample ``jitter`` (N,): LR pixel ``j`` shaded at ``j + jitter`` (its centre at 0)."""
     # float64 positions: floor() must not flip at exact cell boundaries for any size.
     u = (torch.arange(hr, device=device, dtype=torch.float64) + 0.5) * (lr / hr) - 0.5
+    u = u[None] if jitter is None else u[None] - jitter.to(device, torch.float64)[:, None]
     base = torch.floor(u)
     taps = []
     for k in range(1 - radius, radius + 1):
@@ -57,6 +62,16 @@ def _taps(hr: int, lr: int, radius: int, device: torch.device) -> list[tuple[Ten
         weight = (1.0 - (u - j).abs() / radius).clamp_min(0.0)
         taps.append((j.long().clamp(0, lr - 1), weight, u - j))
     return taps
+
+
+def _gather(source: Tensor, dim: int, index: Tensor) -> Tensor:
+    """``source`` indexed along ``dim`` (2: rows, 3: columns) by ``index`` (1, n) shared or (N, n) per sample."""
+    if index.shape[0] == 1:  # one index for the batch: whole rows or columns copied, the cheap path
+        return source.index_select(dim, index[0])
+    n, c, h, w = source.shape
+    shape = (n, c, index.shape[1], w) if dim == 2 else (n, c, h, index.shape[1])
+    view = index[:, None, :, None] if dim == 2 else index[:, None, None, :]
+    return source.gather(dim, view.expand(shape))
 
 
 def check_ranges(sigma_depth: float, sigma_normal: float, sigma_albedo: float, radius: int) -> None:
@@ -71,8 +86,9 @@ class Tap(NamedTuple):
     """One LR neighbour of every HR pixel: its values, where it lies and how its guide differs."""
 
     values: Tensor  # (N, C, H, W): the neighbour's LR values
-    spatial: Tensor  # (H, W): the tent weight
-    offset: tuple[Tensor, Tensor]  # (H,), (W,): the pixel's offset from the neighbour in LR pixels (rows, cols)
+    spatial: Tensor  # (N or 1, 1, H, W): the tent weight
+    offset: tuple[Tensor, Tensor]  # (N or 1, H), (N or 1, W): the pixel's offset from the neighbour's sample in LR
+    # pixels (rows, cols)
     difference: Tensor  # (N, 7, H, W): HR guide minus the neighbour's, scaled by the ranges (albedo, depth, normal)
 
 
@@ -81,6 +97,7 @@ def neighbourhood(
     gbuffer: Tensor,
     *,
     lr_guide: Tensor | None = None,
+    lr_jitter: Tensor | None = None,
     sigma_depth: float = 0.01,
     sigma_normal: float = 0.1,
     sigma_albedo: float = 0.1,
@@ -90,7 +107,9 @@ def neighbourhood(
 
     The guide differences are scaled so that a range term is a plain squared distance: ``exp(-|difference|^2)``
     is the module docstring's range weight. ``lr_guide`` (N, 7, h, w): the LR pixels' albedo, depth and normal
-    (:func:`wdss.data.preprocess.lr_guide`); ``None``: ``gbuffer``'s first 7 channels point-sampled.
+    (:func:`wdss.data.preprocess.lr_guide`); ``None``: ``gbuffer``'s first 7 channels point-sampled. ``lr_jitter``
+    (N, 2): where each sample's LR pixels were shaded, from their centres (x, y in LR pixels; the batch key), which
+    moves the taps and their tent weights; ``None`` or all zero: at the centres.
     """
     check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
     if lr.shape[0] != gbuffer.shape[0] or gbuffer.shape[1] < 7:
@@ -113,15 +132,20 @@ def neighbourhood(
     guide, lr_guide = guide * scales, lr_guide * scales
     source = torch.cat([lr, lr_guide], dim=1)  # gathered together: one index op per tap
     channels = lr.shape[1]
-    rows, cols = _taps(height, h, radius, lr.device), _taps(width, w, radius, lr.device)
+    if lr_jitter is not None and lr_jitter.shape != (lr.shape[0], 2):
+        raise ValueError(f"lr_jitter {tuple(lr_jitter.shape)} is not the (N, 2) jitter of lr {tuple(lr.shape)}")
+    if lr_jitter is not None and not torch.compiler.is_compiling() and not bool(lr_jitter.any()):
+        lr_jitter = None  # every sample at its pixel centre: one set of taps for the batch (graphs keep the jitter)
+    x, y = (None, None) if lr_jitter is None else (lr_jitter[:, 0], lr_jitter[:, 1])
+    rows, cols = _taps(height, h, radius, lr.device, y), _taps(width, w, radius, lr.device, x)
     # Columns first, on the LR rows: the per-tap row gathers then copy whole contiguous rows, the cheap axis.
     for col_index, col_weight, col_offset in cols:
-        source_cols = source.index_select(3, col_index)
+        source_cols = _gather(source, 3, col_index)
         for row_index, row_weight, row_offset in rows:
-            neighbour = source_cols.index_select(2, row_index)
+            neighbour = _gather(source_cols, 2, row_index)
             yield Tap(
                 values=neighbour[:, :channels],
-                spatial=(row_weight[:, None] * col_weight[None, :]).to(lr.dtype),
+                spatial=(row_weight[:, None, :, None] * col_weight[:, None, None, :]).to(lr.dtype),
                 offset=(row_offset.to(lr.dtype), col_offset.to(lr.dtype)),
                 difference=guide - neighbour[:, channels:],
             )
@@ -138,13 +162,14 @@ def joint_bilateral_upsample(
     gbuffer: Tensor,
     *,
     lr_guide: Tensor | None = None,
+    lr_jitter: Tensor | None = None,
     sigma_depth: float = 0.01,
     sigma_normal: float = 0.1,
     sigma_albedo: float = 0.1,
     radius: int = 2,
 ) -> Tensor:
     """Upsample ``lr`` (N, C, h, w) to the grid of ``gbuffer`` (N, 11, H, W), guided by its depth, normal, albedo
-    against ``lr_guide``'s (see :func:`neighbourhood`).
+    against ``lr_guide``'s, the LR pixels shaded where ``lr_jitter`` says (see :func:`neighbourhood`).
 
     See the module docstring for the weights. Returns (N, C, H, W) in ``lr``'s dtype; a convex combination of
     ``lr`` values, so non-negative input stays non-negative.
@@ -156,6 +181,7 @@ def joint_bilateral_upsample(
         lr,
         gbuffer,
         lr_guide=lr_guide,
+        lr_jitter=lr_jitter,
         sigma_depth=sigma_depth,
         sigma_normal=sigma_normal,
         sigma_albedo=sigma_albedo,
@@ -191,7 +217,8 @@ class JointBilateralUpsample(nn.Module):
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr", "gbuffer", "lr_guide") if self.demodulated else ("lr_color", "gbuffer", "brdf", "lr_guide")
+        keys = ("lr", "gbuffer") if self.demodulated else ("lr_color", "gbuffer", "brdf")
+        return (*keys, "lr_guide", "lr_jitter")
 
     def forward(
         self,
@@ -200,6 +227,7 @@ class JointBilateralUpsample(nn.Module):
         lr_color: Tensor | None = None,
         brdf: Tensor | None = None,
         lr_guide: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
         **_: Tensor,
     ) -> dict:
         if gbuffer is None or (self.demodulated and lr is None):
@@ -210,6 +238,7 @@ class JointBilateralUpsample(nn.Module):
             lr if self.demodulated else lr_color,
             gbuffer,
             lr_guide=lr_guide,
+            lr_jitter=lr_jitter,
             sigma_depth=self.sigma_depth,
             sigma_normal=self.sigma_normal,
             sigma_albedo=self.sigma_albedo,

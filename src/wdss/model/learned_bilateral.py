@@ -87,7 +87,7 @@ class LearnedBilateralUpsample(nn.Module):
 
     @property
     def inputs(self) -> tuple[str, ...]:
-        return ("lr", "gbuffer", "lr_guide") + (("brdf", "lr_brdf") if self.tap_brdf else ())
+        return ("lr", "gbuffer", "lr_guide", "lr_jitter") + (("brdf", "lr_brdf") if self.tap_brdf else ())
 
     def upsample(
         self,
@@ -96,6 +96,7 @@ class LearnedBilateralUpsample(nn.Module):
         brdf: Tensor | None = None,
         lr_brdf: Tensor | None = None,
         lr_guide: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
     ) -> Tensor:
         """``lr`` (N, 3, h, w) non-negative irradiance to the grid of ``gbuffer`` (N, 11, H, W): (N, 3, H, W).
 
@@ -104,7 +105,7 @@ class LearnedBilateralUpsample(nn.Module):
         ``b`` in [0, 1] learned per pixel and tap (0 at the start): 0 keeps the demodulated estimate, 1 carries the
         tap's own colour (``irradiance * F_tap``) through unchanged, as a colour-space joint bilateral filter would
         (where ``F_tap / F`` lies within e^5 either way: the ratio is clamped there). ``lr_guide`` (N, 7, h, w): the
-        G-buffer the LR was shaded with (:func:`wdss.model.joint_bilateral.neighbourhood`).
+        G-buffer the LR was shaded with, ``lr_jitter`` (N, 2) where (:func:`wdss.model.joint_bilateral.neighbourhood`).
         """
         if self.tap_brdf and (brdf is None or lr_brdf is None):
             raise ValueError("this learned bilateral kernel has tap_brdf=true: it needs the HR brdf and the lr_brdf")
@@ -112,7 +113,8 @@ class LearnedBilateralUpsample(nn.Module):
         n, (height, width) = lr.shape[0], gbuffer.shape[-2:]
         # Where each tap lies against the fixed estimate: outliers (fireflies, the other side of an edge) show here.
         # A pass of its own: keeping the 16 taps for one pass would hold ~1.7 GB at 1080p instead of one tap.
-        reference = torch.log1p(joint_bilateral_upsample(lr, gbuffer, lr_guide=lr_guide, **self.ranges))
+        fixed = joint_bilateral_upsample(lr, gbuffer, lr_guide=lr_guide, lr_jitter=lr_jitter, **self.ranges)
+        reference = torch.log1p(fixed)
         context = [self.context(gbuffer[:, :GBUFFER_CHANNELS])] if self.context is not None else []
         source = [lr, torch.log1p(lr)]  # gathered together: the values and their logs (and the taps' log F)
         if self.tap_brdf:
@@ -120,14 +122,14 @@ class LearnedBilateralUpsample(nn.Module):
             source.append(torch.log(lr_brdf.float().clamp_min(1e-4)))  # F at the LR pixels, as lr was demodulated
         source = torch.cat(source, 1)
         logits, values = [], []
-        for tap in neighbourhood(source, gbuffer, lr_guide=lr_guide, **self.ranges):
+        for tap in neighbourhood(source, gbuffer, lr_guide=lr_guide, lr_jitter=lr_jitter, **self.ranges):
             row, col = tap.offset
             features = torch.cat(
                 [
                     tap.difference.clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT),
                     tap.difference.abs().clamp_max(_DIFFERENCE_LIMIT),
-                    row.view(1, 1, -1, 1).expand(n, 1, height, width),
-                    col.view(1, 1, 1, -1).expand(n, 1, height, width),
+                    row[:, None, :, None].expand(n, 1, height, width),
+                    col[:, None, None, :].expand(n, 1, height, width),
                     tap.spatial.expand(n, 1, height, width),
                     tap.values[:, 3:6] - reference,
                     *context,
@@ -161,6 +163,7 @@ class LearnedBilateralUpsample(nn.Module):
         brdf: Tensor | None = None,
         lr_brdf: Tensor | None = None,
         lr_guide: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
         **_: Tensor,
     ) -> dict:
-        return {"irradiance": self.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide), "coefficients": None}
+        return {"irradiance": self.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide, lr_jitter), "coefficients": None}

@@ -22,6 +22,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from wdss.data.sampling import upsample
 from wdss.model.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3, from_log, to_log
 from wdss.model.joint_bilateral import joint_bilateral_upsample
 from wdss.model.learned_bilateral import LearnedBilateralUpsample
@@ -233,9 +234,11 @@ class FourierINR(nn.Module):
         hr_size: Sequence[int] | None = None,
         lr_size: Sequence[int] | None = None,
         lr_cell: int = 2,
+        lr_jitter: Tensor | None = None,
     ) -> Tensor:
         """``hr_size``, ``lr_size``: the frames' real pixel counts (default: the grids span them exactly);
-        ``lr_cell``: LR pixels per cell of ``lr_feature`` (see :func:`cell_grid`)."""
+        ``lr_cell``: LR pixels per cell of ``lr_feature`` (see :func:`cell_grid`); ``lr_jitter`` (N, 2): where the LR
+        pixels were shaded (x, y in LR pixels), which moves the cells' centres the offsets are taken from."""
         n, _, hh, wh = gb_feature.shape
         hl, wl = lr_feature.shape[-2:]
         hr_size = hr_size or (2 * hh, 2 * wh)
@@ -245,7 +248,11 @@ class FourierINR(nn.Module):
         amplitude = self.amplitude(lr_feature).index_select(-2, rows).index_select(-1, cols)
         frequency = self.frequency(gb_feature).view(n, self.pairs, 2, hh, wh)
         phase = self.phase((1.0 / scale).view(n, 1).to(gb_feature.dtype)).view(n, self.pairs, 1, 1)
-        theta = frequency[:, :, 0] * dy.view(1, 1, hh, 1) + frequency[:, :, 1] * dx.view(1, 1, 1, wh) + phase
+        dy, dx = dy.view(1, 1, hh, 1), dx.view(1, 1, 1, wh)
+        if lr_jitter is not None:  # an offset unit is one LR pixel / (lr_cell / 2): a cell is 2 units wide
+            jitter = lr_jitter.to(dy.dtype).view(n, 2, 1, 1) * (2.0 / lr_cell)
+            dy, dx = dy - jitter[:, 1:2], dx - jitter[:, 0:1]
+        theta = frequency[:, :, 0] * dy + frequency[:, :, 1] * dx + phase
         feature = amplitude * torch.cat([torch.cos(math.pi * theta), torch.sin(math.pi * theta)], dim=1)
         out = self.mlps[0](feature) if len(self.mlps) == 1 else torch.cat([mlp(feature) for mlp in self.mlps], dim=1)
         return self.exit(out)
@@ -365,6 +372,7 @@ class WDSSNet(nn.Module):
         keys = ("lr", "gbuffer", "spatial_mask") + (("history", "temporal_mask") if self.temporal else ())
         if self.residual in ("joint_bilateral", "learned_bilateral"):  # the kernel compares against the LR's guide
             keys += ("lr_guide",)
+        keys += ("lr_jitter",)  # where the LR pixels were shaded: the INR's offsets and the residual's taps
         return keys + (("brdf", "lr_brdf") if self.upsampler is not None and self.upsampler.tap_brdf else ())
 
     def _to_input(self, x: Tensor) -> Tensor:
@@ -381,6 +389,7 @@ class WDSSNet(nn.Module):
         brdf: Tensor | None = None,
         lr_brdf: Tensor | None = None,
         lr_guide: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
         *,
         subbands: bool = True,
     ) -> dict[str, Tensor | None]:
@@ -398,7 +407,7 @@ class WDSSNet(nn.Module):
         guide = gbuffer  # the whole stack: a joint-bilateral residual base reads depth, normal and albedo
         if self.gbuffer_channels is not None:
             gbuffer = gbuffer[:, self.gbuffer_channels]
-        upsampled = self._upsample(lr, guide, brdf, lr_brdf, lr_guide)
+        upsampled = self._upsample(lr, guide, brdf, lr_brdf, lr_guide, lr_jitter)
         gb_stack = [gbuffer, spatial_mask] + ([self._to_input(upsampled)] if self.residual_input else [])
         gb_in = F.pixel_unshuffle(_pad(torch.cat(gb_stack, 1), pad_hr), 2)
         lr_fusion, lr_inr = self.lr(lr_in)
@@ -410,7 +419,7 @@ class WDSSNet(nn.Module):
             t_in = torch.cat([self._to_input(history), temporal_mask], 1)
             parts.append(self.temporal_branch(F.pixel_unshuffle(_pad(t_in, pad_hr), 2)))
         fusion = self.fusion(torch.cat(parts, 1))
-        inr = self.inr(lr_inr, gb_inr, scale, (height, width), lr.shape[-2:], lr_cell)
+        inr = self.inr(lr_inr, gb_inr, scale, (height, width), lr.shape[-2:], lr_cell, lr_jitter)
         merged = torch.cat([fusion, inr], 1) if self.head == "fusion_ll" else fusion + inr
         base = None if upsampled is None else _pad(self._to_space(upsampled), pad_hr)
         coefficients: Tensor | None
@@ -470,15 +479,17 @@ class WDSSNet(nn.Module):
         brdf: Tensor | None = None,
         lr_brdf: Tensor | None = None,
         lr_guide: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
     ) -> Tensor | None:
         """The upsampled LR irradiance the head adds to (linear, HR size), or None without a residual."""
         if self.residual == "none":
             return None
         if self.residual == "bilinear":
-            return F.interpolate(lr.float(), size=gbuffer.shape[-2:], mode="bilinear", align_corners=False)
+            return upsample(lr.float(), gbuffer.shape[-2:], "bilinear", lr_jitter)
         if self.upsampler is not None:
-            return self.upsampler.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide)
-        return joint_bilateral_upsample(lr.float(), gbuffer.float(), lr_guide=lr_guide)  # the guide in lr's dtype
+            return self.upsampler.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide, lr_jitter)
+        # the guide in lr's dtype
+        return joint_bilateral_upsample(lr.float(), gbuffer.float(), lr_guide=lr_guide, lr_jitter=lr_jitter)
 
     def target_coefficients(self, irradiance: Tensor) -> Tensor | None:
         """The analysis of a target irradiance ``(N, 3, H, W)`` in the space and layout of the predicted

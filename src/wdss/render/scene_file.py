@@ -453,8 +453,17 @@ class FileScene:
         return ray_cast
 
     # -- rendering -----------------------------------------------------------------------------------------------
-    def render(self, frame: int, width: int, height: int, *, samples: int | None = None) -> dict[str, np.ndarray]:
-        """Render ``frame`` at ``width x height``; the passes as ``(C, H, W)`` float32 arrays, rows top-down."""
+    def render(
+        self,
+        frame: int,
+        width: int,
+        height: int,
+        *,
+        samples: int | None = None,
+        jitter: tuple[float, float] | None = None,
+    ) -> dict[str, np.ndarray]:
+        """Render ``frame`` at ``width x height`` (sub-pixel ``jitter``: see
+        :func:`wdss.render.blender.render_passes`); the passes as ``(C, H, W)`` float32 arrays, rows top-down."""
         from wdss.render.blender import render_passes
 
         self.scene.frame_set(self.offset + frame)
@@ -465,4 +474,5 @@ class FileScene:
             samples=samples or self.samples,
             denoise=self.denoise,
             filter_width=self.filter_width,
+            jitter=jitter,
         )

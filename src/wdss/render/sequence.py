@@ -4,7 +4,9 @@ A sequence of ``frames`` frames is rendered from frame 0 to ``frames`` inclusive
 frame 1 has a previous frame (its motion vectors point to frame 0). Low-resolution folders for each scale
 are either nearest-exact point samples of the high-resolution buffers (``lr_mode="downsample"``, as in the
 authors' data) or native renders at the lower resolution with point-sampled, aliased G-buffers
-(``lr_mode="native"``). Motion vectors are in high-resolution pixels in every folder.
+(``lr_mode="native"``), each LR frame shaded at its pixel centres or, with ``lr_mode="jittered"``, at a
+per-frame sub-pixel jitter (:func:`wdss.data.sampling.halton_jitter`, recorded per frame as ``lr_jitter``), as
+engines hand their upscalers. Motion vectors are in high-resolution pixels in every folder.
 
 Each file is written atomically (temporary name, then rename), so a killed render leaves no half-written
 EXR; a frame whose files all exist is skipped when the render is run again.
@@ -28,7 +30,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from wdss.data.exr import write_exr
 from wdss.data.layouts import UnrealLayout
-from wdss.data.sampling import lr_size, point_sample
+from wdss.data.sampling import JITTER_PHASES, halton_jitter, lr_size, point_sample
 from wdss.progress import duration
 from wdss.render.exposure import auto_exposure
 from wdss.render.scene_file import check_scene, file_digest
@@ -88,14 +90,26 @@ def sampling_convention(lr_mode: str, filter_width: float, folders: Mapping[int,
 
     ``point``: LR pixel i is HR pixel floor((i + 0.5) s), colour and G-buffer alike (the authors' data); ``native``:
     rendered at LR, every buffer sampled at the LR pixel centres (between HR pixel centres at even scales), as an
-    engine renders its LR frame. G-buffers are point-sampled (raster-like) at a pixel filter of at most 0.01
-    pixels, else filtered (anti-aliased) by it."""
-    lr = "native" if lr_mode == "native" else "point"
+    engine renders its LR frame; with a ``jitter`` (``lr_mode="jittered"``), at ``i + 0.5 + j`` for the frame's
+    ``lr_jitter`` ``j`` (in ``frames``, LR pixels, x right, y down). G-buffers are point-sampled (raster-like) at a
+    pixel filter of at most 0.01 pixels, else filtered (anti-aliased) by it."""
+    lr = "point" if lr_mode == "downsample" else "native"
+    jitter = f"per frame (frames[].lr_jitter): Halton(2, 3), {JITTER_PHASES} phases" if lr_mode == "jittered" else None
     return {
-        "lr": {f"{h}P": {"scale": s, "lr": lr, "jitter": None} for h, s in sorted(folders.items(), reverse=True)},
+        "lr": {f"{h}P": {"scale": s, "lr": lr, "jitter": jitter} for h, s in sorted(folders.items(), reverse=True)},
         "gbuffer": "point-sampled" if filter_width <= 0.01 else "filtered",
         "filter_width_px": filter_width,
     }
+
+
+# How the LR folders are made (render.lr_mode): point samples of the HR frame, or rendered at LR without and with
+# a per-frame sub-pixel jitter.
+LR_MODES = ("downsample", "native", "jittered")
+
+
+def _jitter_record(lr_mode: str, frame: int) -> dict[str, list[float]]:
+    """The frame's sidecar entry for its LR sample offset: ``lr_jitter`` where the LR frames are jittered."""
+    return {"lr_jitter": list(halton_jitter(frame))} if lr_mode == "jittered" else {}
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -144,8 +158,8 @@ def render_sequence(
     scene_path = check_scene(scene, camera, lighting, where=f"sequence {name!r}")
     if scene_path is not None and spec is not None:
         raise ValueError(f"sequence {name!r}: give a procedural spec or a scene file (render.scene), not both")
-    if lr_mode not in ("downsample", "native"):
-        raise ValueError(f"render.lr_mode must be 'downsample' or 'native', got {lr_mode!r}")
+    if lr_mode not in LR_MODES:
+        raise ValueError(f"render.lr_mode must be one of {', '.join(LR_MODES)}, got {lr_mode!r}")
     width, height = resolution
     scales = [int(s) for s in scales]
     if exposure != "auto" and not (isinstance(exposure, (int, float)) and exposure > 0):
@@ -229,7 +243,9 @@ def render_sequence(
         },
         "sampling": sampling_convention(lr_mode, filter_width, {height // s: s for s in scales}),
         "scene": description,
-        "frames": [{"frame": f, "camera_to_world": poses[f].tolist()} for f in range(frames + 1)],
+        "frames": [
+            {"frame": f, "camera_to_world": poses[f].tolist(), **_jitter_record(lr_mode, f)} for f in range(frames + 1)
+        ],
         "render_seconds": (previous_meta or {}).get("render_seconds", {}),
         # The pre-exposure applied to the radiance of every frame (None until the probes have chosen it).
         "exposure": exposure if exposure != "auto" else (previous_meta or {}).get("exposure"),
@@ -260,7 +276,8 @@ def render_sequence(
             if lr_mode == "downsample":
                 lr = {k: point_sample(torch.from_numpy(v)[None], size)[0].numpy() for k, v in hr.items()}
             else:
-                passes = scene.render(frame, size[1], size[0], samples=lr_samples)
+                jitter = halton_jitter(frame) if lr_mode == "jittered" else None
+                passes = scene.render(frame, size[1], size[0], samples=lr_samples, jitter=jitter)
                 lr = to_buffers(
                     passes, camera=camera_to_world, previous_camera=previous, lens=lens, motion_scale=float(s)
                 )
