@@ -185,6 +185,7 @@ def test_joint_bilateral_is_a_baseline_row(tmp_path):
         "lr",
         "gbuffer",
         "lr_guide",
+        "lr_jitter",
         "brdf",
         "target",
         "emission",

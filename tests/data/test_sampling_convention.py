@@ -134,3 +134,18 @@ def test_the_test_split_can_read_another_convention_than_training(tmp_path):
     assert dm.datasets["train"].lr_source == dm.datasets["val"].lr_source == "native"
     assert [d.lr_source for d in dm.datasets["test"]] == ["point"] * 3
     assert SceneDataModule(tmp_path / "scenes", splits, KEYS, lr_source="point").test_lr_source == "point"
+
+
+def test_the_test_split_can_read_the_same_scenes_rendered_under_another_convention(tmp_path):
+    from wdss.data import SceneDataModule
+
+    write_sequence(tmp_path / "centred" / "seq", frames=(1, 2), size=HR, scales=(2,))
+    _native_like(tmp_path / "other" / "seq")
+    splits = {"train": ["seq"], "val": ["seq"], "test": ["seq"]}
+    dm = SceneDataModule(tmp_path / "centred", splits, KEYS, scale=2.0, patch_size=None, test_root=tmp_path / "other")
+    dm.setup()
+    assert dm.datasets["train"].sequences[0].source.path == tmp_path / "centred" / "seq"
+    test = dm.datasets["test"][0].sequences[0]
+    assert test.source.path == tmp_path / "other" / "seq"
+    with pytest.raises(SceneError, match="data.test_root .*missing is not a folder"):
+        SceneDataModule(tmp_path / "centred", splits, KEYS, test_root=tmp_path / "missing").setup("test")

@@ -114,7 +114,8 @@ class SceneDataModule(L.LightningDataModule):
     ``lr_source`` is the LR sampling convention read: ``auto`` (a native ``<H>P`` folder where one matches the
     scale, else the HR frame point-sampled), ``native`` (required) or ``point`` (always point-sampled);
     ``test_lr_source`` the test split's (``None``: the same), so that a model trained on one convention is tested
-    on another.
+    on another; ``test_root`` a folder the test split's sequences are read from instead of ``root`` (the same scenes
+    rendered under another convention: jittered LR, filtered G-buffers), EXR files only.
     ``patches_per_frame`` random patches of every training frame make one epoch. ``prepare`` is called with
     ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset), or when it holds
     a wdss render (``sequence.json`` files) that was stopped before every sequence of the splits was finished.
@@ -149,6 +150,7 @@ class SceneDataModule(L.LightningDataModule):
         cache_mb: int = 1024,
         lr_source: str = "auto",
         test_lr_source: str | None = None,
+        test_root: str | Path | None = None,
     ) -> None:
         super().__init__()
         if format not in FORMATS:
@@ -169,6 +171,7 @@ class SceneDataModule(L.LightningDataModule):
         self.scale = parse_scale(scale)
         self.lr_source = lr_source
         self.test_lr_source = lr_source if test_lr_source is None else test_lr_source
+        self.test_root = Path(test_root) if test_root is not None else None
         self.val_scale = float(val_scale) if val_scale is not None else self._middle(self.scale)
         self.test_scales = tuple(float(s) for s in test_scales)
         self.patch_size = patch_size
@@ -237,9 +240,10 @@ class SceneDataModule(L.LightningDataModule):
         :mod:`wdss.render.noise`: the PSNR a perfect method would score against them, Hable at exposure 10) and
         over how many frames; sequences without one are left out."""
         names, _ = self.splits.get(split, ([], {}))
+        root = self.test_root if split == "test" and self.test_root is not None else self.root
         ceilings = {}
         for name in names:
-            sidecar = self.root / name / "sequence.json"
+            sidecar = root / name / "sequence.json"
             noise = json.loads(sidecar.read_text()).get("noise") if sidecar.is_file() else None
             if noise and "ceiling_psnr_db" in noise:
                 ceilings[name] = (float(noise["ceiling_psnr_db"]), len(noise.get("frames") or [1]))
@@ -249,6 +253,10 @@ class SceneDataModule(L.LightningDataModule):
         if split not in self.splits:
             raise SceneError(f"data.splits has no {split!r} split")
         names, ranges = self.splits[split]
+        if split == "test" and self.test_root is not None:
+            if not self.test_root.is_dir():
+                raise SceneError(f"data.test_root {self.test_root} is not a folder (render it first)")
+            return self._cached(discover_sequences(self.test_root, names, self.layout)), ranges
         if self.format == "exr":
             return self._cached(discover_sequences(self.root, names, self.layout)), ranges
         if self.format == "packed":
