@@ -92,6 +92,7 @@ def test_onnx_graph_matches_torch_on_a_fixture_frame(name, tmp_path):
         expected += ["brdf"]
     assert [i.name for i in graph.graph.input] == [i["name"] for i in layout["inputs"]] == expected
     assert [o.name for o in graph.graph.output] == ["color", "irradiance"]
+    assert layout["lr_sampling"].startswith("LR pixels shaded at their centres")  # no lr_jitter input (above)
     assert layout["inputs"][1]["channels"][:4] == ["base_color.r", "base_color.g", "base_color.b", "depth"]
     assert layout["history"].startswith("recurrent" if name == "dfasr" else "the previous HR frame")
     # No frame-sized constant (an exporter folds in-place padding into one): weights are the largest tensors.

@@ -243,6 +243,8 @@ def input_layout(
         "opset": opset,
         "dtype": dtype,
         "layout": "NCHW, batch of 1",
+        # wdss's networks take a per-frame jitter in torch (the batch key lr_jitter); a graph does not (yet).
+        "lr_sampling": "LR pixels shaded at their centres (no jitter input): render the LR frame unjittered",
         "size": {
             "dynamic": dynamic,
             # dynamic: any size whose HR and LR heights and widths are even (the graph holds the even branch)
