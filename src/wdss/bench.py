@@ -20,6 +20,7 @@ from rich.console import Console
 from rich.table import Table
 
 from wdss.data.preprocess import prediction_color
+from wdss.data.sampling import upsample as upsample_lr
 from wdss.memory import memory_retained, restart_with_retained_memory
 from wdss.model.blocks import from_log, to_log
 
@@ -722,10 +723,13 @@ class PlainReference(torch.nn.Module):
 
     def inputs(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
         size = batch["gbuffer"].shape[-2:]
+        jitter = batch.get("lr_jitter")
         if self.upsample is None:
-            upsampled = torch.nn.functional.interpolate(batch["lr"], size=size, mode="bilinear")
-        else:
-            upsampled = self.upsample(batch["lr"], batch["gbuffer"], batch.get("brdf"), batch.get("lr_brdf"))
+            upsampled = upsample_lr(batch["lr"], size, "bilinear", jitter)
+        else:  # the start the model's own residual has: its guide and jitter
+            upsampled = self.upsample(
+                batch["lr"], batch["gbuffer"], batch.get("brdf"), batch.get("lr_brdf"), batch.get("lr_guide"), jitter
+            )
         base = to_log(upsampled)
         parts = [base, batch["gbuffer"], batch["spatial_mask"]]
         if "history" in batch:

@@ -11,9 +11,10 @@ from tests.model.helpers import TINY
 from wdss.data import Collate, FrameDataset, SceneError, Sequence
 from wdss.data.sampling import JITTER_PHASES, halton_jitter, upsample
 from wdss.data.synthetic import write_sequence
+from wdss.data.warp import spatial_mask
 from wdss.model.joint_bilateral import joint_bilateral_upsample
 from wdss.model.learned_bilateral import LearnedBilateralUpsample
-from wdss.model.network import WDSSNet
+from wdss.model.network import FourierINR, WDSSNet
 
 HR = (24, 36)
 JITTER = torch.tensor([[0.3, -0.2], [-0.45, 0.1], [0.0, 0.0]])
@@ -113,6 +114,47 @@ def test_the_network_reads_the_jitter_per_sample_in_its_inr_offsets_and_its_resi
     torch.testing.assert_close(jittered[2:], centred[2:])  # the third sample is not jittered
 
 
+@pytest.mark.parametrize("lr_cell,scale,jitter", [(2, 2, -1.0), (1, 4, -0.5)])
+def test_the_inr_offsets_move_by_the_jitter_in_lr_pixels(lr_cell, scale, jitter):
+    """With spatially constant features an INR's output varies only with each HR/2 cell's offset from its LR cell.
+    Here two HR/2 rows (columns) share an LR cell, one row apart in offset by ``jitter`` LR pixels: jittered by it,
+    row r must give what row r + 1 gives centred (a wrong sign, unit or axis does not)."""
+    torch.manual_seed(4)
+    inr = FourierINR(4, 4, 8, 8, 1, 4)
+    inr.exit = torch.nn.Identity()  # the 3x3 exit would mix rows
+    hr, lr = 32, 32 // scale
+    lr_feature = torch.rand(1, 4, 1, 1).expand(1, 4, lr // lr_cell, lr // lr_cell).contiguous()
+    gb_feature = torch.rand(1, 4, 1, 1).expand(1, 4, hr // 2, hr // 2).contiguous()
+    args = (lr_feature, gb_feature, torch.full((1,), float(scale)), (hr, hr), (lr, lr), lr_cell)
+    with torch.no_grad():
+        centred = inr(*args)
+        down = inr(*args, torch.tensor([[0.0, jitter]]))
+        right = inr(*args, torch.tensor([[jitter, 0.0]]))
+    inner = slice(2, hr // 2 - 2)  # away from the convolutions' zero padding
+    for r in range(2, hr // 2 - 3, 2):
+        torch.testing.assert_close(down[..., r, inner], centred[..., r + 1, inner])
+        torch.testing.assert_close(right[..., inner, r], centred[..., inner, r + 1])
+    assert not torch.allclose(down[..., 2, inner], centred[..., 2, inner])
+
+
+def test_the_spatial_mask_compares_the_hr_g_buffer_with_the_lr_one_where_it_was_shaded():
+    """A depth step shaded at jittered LR positions agrees with the HR step where the mask places it right."""
+    height, width, s = 16, 32, 4
+    jitter = torch.tensor([[0.5, 0.0]])
+    x_hr = torch.arange(width) + 0.5
+    x_lr = (torch.arange(width // s) + 0.5 + 0.5) * s
+
+    def buffers(x: torch.Tensor, h: int) -> dict:
+        depth = (0.2 + 0.02 * x).view(1, 1, 1, -1).expand(1, 1, h, -1)  # a ramp: bilinear reproduces it
+        return {"depth": depth, "normal": torch.tensor([0.0, 0.0, 1.0]).view(1, 3, 1, 1).expand(1, 3, h, x.numel()),
+                "base_color": torch.full((1, 3, h, x.numel()), 0.5)}  # fmt: skip
+
+    hr, lr = buffers(x_hr, height), buffers(x_lr, height // s)
+    inner = (..., slice(None), slice(2 * s, -2 * s))
+    assert spatial_mask(hr, lr, jitter=jitter)[inner].sum() == 0
+    assert spatial_mask(hr, lr)[inner].sum() > 0  # taken as centred, every depth is off by 0.02 * 0.5 * 4
+
+
 def _jittered_sequence(path, jitter: dict[int, list[float]]):
     folder = write_sequence(path, frames=(1, 2), size=HR, scales=(2,), cameras=True)
     meta = json.loads((folder / "sequence.json").read_text())
@@ -132,13 +174,19 @@ def test_the_batch_carries_each_frames_recorded_jitter_mirrored_with_the_image(t
     # Point samples of the HR frame are taken here, at the LR pixel centres' HR pixels: no jitter.
     point = FrameDataset([Sequence(folder)], keys, scale=2.0, lr_source="point")
     assert torch.equal(Collate(point.keys, point.prep, 2.0)([point[0]])["lr_jitter"], torch.zeros(1, 2))
-    # Mirrored patches: the jitter changes sign along each mirrored axis, with the image.
-    flipped = FrameDataset([Sequence(folder)], keys, scale=2.0, lr_source="native", patch=8, flips=True, seed=3)
+    # Mirrored frames: the jitter changes sign along each axis the image was mirrored on.
+    flipped = FrameDataset([Sequence(folder)], keys, scale=2.0, lr_source="native", flips=True, seed=3)
+    unflipped = native[0]["lr"]["color"]
     seen = set()
     for epoch in range(12):
-        jx, jy = flipped[(0, epoch, 2.0)]["lr_jitter"].tolist()
-        assert abs(jx) == 0.25 and abs(jy) == 0.125
-        seen.add((jx, jy))
+        sample = flipped[(0, epoch, 2.0)]
+        color = sample["lr"]["color"]
+        horizontal = not torch.equal(color, unflipped) and torch.equal(color, unflipped.flip(-1))
+        vertical = not torch.equal(color, unflipped) and torch.equal(color, unflipped.flip(-2))
+        both = torch.equal(color, unflipped.flip(-1, -2))
+        signs = (-1 if horizontal or both else 1, -1 if vertical or both else 1)
+        assert sample["lr_jitter"].tolist() == [0.25 * signs[0], -0.125 * signs[1]]
+        seen.add(signs)
     assert len(seen) == 4  # every combination of mirrored axes occurred
 
 

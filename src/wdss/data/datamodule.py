@@ -14,8 +14,9 @@ key                shape                        meaning
 ``lr_guide``       (N, 7, h, w)                 the G-buffer the LR colour was shaded with: albedo 3, depth 1,
                                                 normal 3 (a native LR folder's own, else the HR one point-sampled
                                                 at the LR pixels: ``wdss.data.preprocess.lr_guide``)
-``lr_jitter``       (N, 2)                       where the LR pixels were shaded, from their centres: x right, y down,
-                                                LR pixels (a jittered native LR frame's ``lr_jitter``, else 0)
+``lr_jitter``      (N, 2)                       where the LR pixels were shaded, from their centres: x right, y down,
+                                                LR pixels (a jittered native LR frame's ``lr_jitter``, negated
+                                                along a mirrored axis; else 0)
 ``gbuffer``        (N, 11, H, W)                base colour 3, depth 1, normal 3, specular, roughness, NoV,
                                                 metallic (``wdss.data.dataset.GBUFFER_STACK``)
 ``spatial_mask``   (N, 1, H, W)                 1 where HR and upsampled LR G-buffers disagree

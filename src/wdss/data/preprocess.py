@@ -172,7 +172,7 @@ class RawBatch:
                 roles[low] = {
                     n: point_sample(_crop(roles[high][n], margin, height, width), size) for n in self.sampled[low]
                 }
-        batch = build_batch(set(self.keys), roles, prep, self.margins)
+        batch = build_batch(set(self.keys), roles, prep, self.margins, self.lr_jitter)
         if "lr_jitter" in self.keys:
             jitter = self.lr_jitter if self.lr_jitter is not None else torch.zeros(len(self), 2)
             batch["lr_jitter"] = jitter.to(self.frame.device, torch.float32)
@@ -235,10 +235,12 @@ def build_batch(
     roles: dict[str, dict[str, Tensor]],
     prep: Preprocessing,
     margins: dict[str, int] | None = None,
+    lr_jitter: Tensor | None = None,
 ) -> dict[str, Tensor]:
     """The named batch tensors from cleaned, stacked ``(N, C, H, W)`` buffers of each role.
 
-    ``margins``: pixels on every side by which ``prev`` and ``prev2`` extend beyond the current frame's window.
+    ``margins``: pixels on every side by which ``prev`` and ``prev2`` extend beyond the current frame's window;
+    ``lr_jitter`` (N, 2): where the LR pixels were shaded (the spatial mask places them there).
     """
     keys = set(keys)
     m1, m2 = (margins or {}).get("prev", 0), (margins or {}).get("prev2", 0)
@@ -265,7 +267,12 @@ def build_batch(
     if "spatial_mask" in keys:
         t = prep.spatial_thresholds
         batch["spatial_mask"] = spatial_mask(
-            hr, lr, depth_threshold=t["depth"], normal_threshold=t["normal"], albedo_threshold=t["albedo"]
+            hr,
+            lr,
+            depth_threshold=t["depth"],
+            normal_threshold=t["normal"],
+            albedo_threshold=t["albedo"],
+            jitter=lr_jitter,
         )
     if "history" in keys or "temporal_mask" in keys:
         motion = hr["motion"]

@@ -27,6 +27,7 @@ __all__ = [
     "halton_jitter",
     "lr_size",
     "point_sample",
+    "centred",
     "scale_matches",
     "upsample",
 ]
@@ -72,12 +73,20 @@ def flip_jitter(jitter: Tensor, *, horizontal: bool, vertical: bool) -> Tensor:
     return jitter * sign.to(jitter.device)
 
 
+def centred(jitter: Tensor | None) -> bool:
+    """Whether every sample's LR pixels were shaded at their centres (``jitter`` None or zero). Graphs being
+    compiled or exported keep the jittered path: the answer would depend on the data."""
+    return jitter is None or (not torch.compiler.is_compiling() and not bool(jitter.any()))
+
+
 def upsample(x: Tensor, size: tuple[int, int], mode: str = "bilinear", jitter: Tensor | None = None) -> Tensor:
     """``x`` (N, C, h, w) interpolated (``bilinear`` or ``bicubic``) onto an ``H x W`` grid, cell centres aligned,
     its pixels taken as shaded where ``jitter`` (N, 2; x, y in LR pixels) says; ``None`` or zero: at their centres
     (``F.interpolate``). Beyond the outer samples, the border value."""
-    if jitter is None or (not torch.compiler.is_compiling() and not bool(jitter.any())):
+    if centred(jitter):
         return F.interpolate(x, size=tuple(size), mode=mode, align_corners=False)
+    if jitter.shape != (x.shape[0], 2):
+        raise ValueError(f"jitter {tuple(jitter.shape)} is not the (N, 2) jitter of {tuple(x.shape)}")
     (h, w), (height, width) = x.shape[-2:], size
     # Normalised grid coordinates (align_corners=False): the HR pixel centres, less each sample's jitter.
     ys = (2 * torch.arange(height, device=x.device, dtype=x.dtype) + 1) / height - 1

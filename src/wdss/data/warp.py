@@ -12,6 +12,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from wdss.data.sampling import upsample
+
 __all__ = ["normalize_normals", "spatial_mask", "temporal_mask", "warp_backward"]
 
 
@@ -52,8 +54,10 @@ def spatial_mask(
     depth_threshold: float = 0.01,
     normal_threshold: float = 0.9,
     albedo_threshold: float = 0.1,
+    jitter: Tensor | None = None,
 ) -> Tensor:
-    """1 where the high-resolution G-buffer disagrees with the bilinearly upsampled low-resolution one.
+    """1 where the high-resolution G-buffer disagrees with the bilinearly upsampled low-resolution one (its pixels
+    placed where they were shaded: ``jitter``, the batch key ``lr_jitter``).
 
     ``hr`` and ``lr`` hold ``depth``, ``normal`` and ``base_color``. A pixel is marked when
     ``|depth difference| > depth_threshold`` or ``n_hr . n_lr < normal_threshold`` or the mean absolute
@@ -62,7 +66,7 @@ def spatial_mask(
     size = hr["depth"].shape[-2:]
 
     def up(t: Tensor) -> Tensor:
-        return F.interpolate(t, size=size, mode="bilinear", align_corners=False)
+        return upsample(t, size, "bilinear", jitter)
 
     depth = (hr["depth"] - up(lr["depth"])).abs() > depth_threshold
     normal = (normalize_normals(hr["normal"]) * normalize_normals(up(lr["normal"]))).sum(1, keepdim=True)

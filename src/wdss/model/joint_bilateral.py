@@ -28,7 +28,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor, nn
 
-from wdss.data.sampling import point_sample
+from wdss.data.sampling import centred, point_sample
 
 __all__ = [
     "FALLBACK_WEIGHT",
@@ -134,8 +134,8 @@ def neighbourhood(
     channels = lr.shape[1]
     if lr_jitter is not None and lr_jitter.shape != (lr.shape[0], 2):
         raise ValueError(f"lr_jitter {tuple(lr_jitter.shape)} is not the (N, 2) jitter of lr {tuple(lr.shape)}")
-    if lr_jitter is not None and not torch.compiler.is_compiling() and not bool(lr_jitter.any()):
-        lr_jitter = None  # every sample at its pixel centre: one set of taps for the batch (graphs keep the jitter)
+    if centred(lr_jitter):
+        lr_jitter = None  # every sample at its pixel centre: one set of taps for the batch
     x, y = (None, None) if lr_jitter is None else (lr_jitter[:, 0], lr_jitter[:, 1])
     rows, cols = _taps(height, h, radius, lr.device, y), _taps(width, w, radius, lr.device, x)
     # Columns first, on the LR rows: the per-tap row gathers then copy whole contiguous rows, the cheap axis.
