@@ -303,7 +303,29 @@ LAYOUTS: dict[str, type[SceneLayout]] = {"unreal": UnrealLayout, "dfasr": DFASRL
 # --------------------------------------------------------------------------------------------------------
 
 
-class Sequence:
+class Sidecar(NamedTuple):
+    """What a ``sequence.json`` tells the loader: camera rotations and LR sample offsets by frame, the frame rate."""
+
+    cameras: dict[int, torch.Tensor]
+    frame_rate: float = DEFAULT_FRAME_RATE
+    lr_jitter: dict[int, tuple[float, float]] = {}
+
+
+class SidecarFacts:
+    """The per-frame facts of a sequence's ``sequence.json`` (``self._sidecar``), for every kind of sequence."""
+
+    _sidecar: Sidecar
+
+    def camera(self, frame: int) -> torch.Tensor | None:
+        """The 3x3 camera-to-world rotation of ``frame`` from the sidecar ``sequence.json``, if there is one."""
+        return self._sidecar.cameras.get(frame)
+
+    def lr_jitter(self, frame: int) -> tuple[float, float]:
+        """Where ``frame``'s native LR pixels were shaded, from their centres (LR pixels, x right, y down)."""
+        return self._sidecar.lr_jitter.get(frame, (0.0, 0.0))
+
+
+class Sequence(SidecarFacts):
     """One sequence of frames in a known layout; :meth:`read` loads named buffers of one frame."""
 
     def __init__(self, path: str | Path, layout: str = "auto") -> None:
@@ -356,14 +378,6 @@ class Sequence:
         """The file (relative to the sequence) holding ``buffer`` of ``frame`` at ``height``, or None."""
         found = self.layout.locate(buffer, height, frame, self._index)
         return found[0] if found else None
-
-    def camera(self, frame: int) -> torch.Tensor | None:
-        """The 3x3 camera-to-world rotation of ``frame`` from the sidecar ``sequence.json``, if there is one."""
-        return self._sidecar.cameras.get(frame)
-
-    def lr_jitter(self, frame: int) -> tuple[float, float]:
-        """Where ``frame``'s native LR pixels were shaded, from their centres (LR pixels, x right, y down)."""
-        return self._sidecar.lr_jitter.get(frame, (0.0, 0.0))
 
     def _read_sidecar(self) -> Sidecar:
         if not self.source.has("sequence.json"):
@@ -481,14 +495,6 @@ class Sequence:
                 f"the sequence's first frame at {height}P is {expected[1]}x{expected[0]} "
                 f"({self.source.describe(reference)}); every frame of a sequence needs one size per resolution"
             )
-
-
-class Sidecar(NamedTuple):
-    """What a ``sequence.json`` tells the loader: camera rotations and LR sample offsets by frame, the frame rate."""
-
-    cameras: dict[int, torch.Tensor]
-    frame_rate: float = DEFAULT_FRAME_RATE
-    lr_jitter: dict[int, tuple[float, float]] = {}
 
 
 def parse_sidecar(raw: bytes, where: str) -> Sidecar:

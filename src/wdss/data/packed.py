@@ -31,9 +31,8 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
-import torch
 
-from wdss.data.layouts import BUFFERS, SceneError, Sidecar, parse_sidecar
+from wdss.data.layouts import BUFFERS, SceneError, Sidecar, SidecarFacts, parse_sidecar
 from wdss.data.preprocess import depth_range
 
 __all__ = ["FORMAT", "VERSION", "PackedSequence", "discover_packed", "far_key", "is_packed"]
@@ -72,7 +71,7 @@ def repack_hint(folder: Path) -> str:
     return f"re-pack it: remove {folder} and run python -m wdss.data.pack root=<the EXR scenes> out={folder.parent}"
 
 
-class PackedSequence:
+class PackedSequence(SidecarFacts):
     """One packed sequence (a folder of :mod:`wdss.data.packed`); reads windows of frames as numpy arrays.
 
     Opening checks the index and that every file has the length its index records (a truncated or overwritten
@@ -164,12 +163,6 @@ class PackedSequence:
         if res is None or buffer not in res["buffers"]:
             return False
         return frame is None or str(frame) in res["packed"]
-
-    def camera(self, frame: int) -> torch.Tensor | None:
-        return self._sidecar.cameras.get(frame)
-
-    def lr_jitter(self, frame: int) -> tuple[float, float]:
-        return self._sidecar.lr_jitter.get(frame, (0.0, 0.0))
 
     def shape(self, height: int) -> tuple[int, int]:
         h, w = self._res[height]["shape"]

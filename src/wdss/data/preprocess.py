@@ -140,13 +140,12 @@ class RawBatch:
     sampled: dict[str, tuple[str, ...]]
     sequence: list[str]
     frame: Tensor
-    lr_jitter: Tensor | None = None  # (N, 2): where each sample's LR pixels were shaded (None: at their centres)
+    lr_jitter: Tensor  # (N, 2): where each sample's LR pixels were shaded, from their centres (0: point-sampled)
 
     def _apply(self, fn) -> RawBatch:
         roles = {role: {k: fn(v) for k, v in buffers.items()} for role, buffers in self.roles.items()}
-        jitter = None if self.lr_jitter is None else fn(self.lr_jitter)
         ranges = {k: fn(v) for k, v in self.ranges.items()}
-        return replace(self, roles=roles, ranges=ranges, frame=fn(self.frame), lr_jitter=jitter)
+        return replace(self, roles=roles, ranges=ranges, frame=fn(self.frame), lr_jitter=fn(self.lr_jitter))
 
     def to(self, device: torch.device | str, non_blocking: bool = False) -> RawBatch:
         return self._apply(lambda t: t.to(device, non_blocking=non_blocking))
@@ -173,9 +172,6 @@ class RawBatch:
                     n: point_sample(_crop(roles[high][n], margin, height, width), size) for n in self.sampled[low]
                 }
         batch = build_batch(set(self.keys), roles, prep, self.margins, self.lr_jitter)
-        if "lr_jitter" in self.keys:
-            jitter = self.lr_jitter if self.lr_jitter is not None else torch.zeros(len(self), 2)
-            batch["lr_jitter"] = jitter.to(self.frame.device, torch.float32)
         batch["scale"] = torch.full((len(self),), self.scale, device=self.frame.device)
         batch["sequence"] = list(self.sequence)
         batch["frame"] = self.frame
@@ -240,7 +236,8 @@ def build_batch(
     """The named batch tensors from cleaned, stacked ``(N, C, H, W)`` buffers of each role.
 
     ``margins``: pixels on every side by which ``prev`` and ``prev2`` extend beyond the current frame's window;
-    ``lr_jitter`` (N, 2): where the LR pixels were shaded (the spatial mask places them there).
+    ``lr_jitter`` (N, 2): where the LR pixels were shaded, from their centres (the spatial mask places them there;
+    the key of that name passes it on; ``None``: at their centres).
     """
     keys = set(keys)
     m1, m2 = (margins or {}).get("prev", 0), (margins or {}).get("prev2", 0)
@@ -262,6 +259,10 @@ def build_batch(
         batch["lr_color"] = lr["color"]
     if "lr_guide" in keys:
         batch["lr_guide"] = lr_guide(lr)
+    if "lr_jitter" in keys:
+        any_buffer = next(t for buffers in roles.values() for t in buffers.values())
+        jitter = torch.zeros(len(any_buffer), 2) if lr_jitter is None else lr_jitter
+        batch["lr_jitter"] = jitter.to(any_buffer.device, torch.float32)
     if "gbuffer" in keys:
         batch["gbuffer"] = torch.cat([hr[name] for name in GBUFFER_STACK], dim=1)
     if "spatial_mask" in keys:

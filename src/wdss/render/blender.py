@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from wdss.data.exr import read_exr
+from wdss.render.cycles_scene import CyclesScene
 from wdss.render.spec import Material, SceneSpec, camera_pose, object_pose
 
 try:
@@ -105,7 +106,7 @@ _SHAPES = {
 }
 
 
-class BlenderScene:
+class BlenderScene(CyclesScene):
     """One scene in Blender, rendered frame by frame with fixed settings."""
 
     def __init__(self, spec: SceneSpec, *, samples: int, denoise: bool, filter_width: float, threads: int = 0):
@@ -176,27 +177,8 @@ class BlenderScene:
         self.scene.frame_set(frame)
         return camera_pose(self.spec.camera, frame)
 
-    def render(
-        self,
-        frame: int,
-        width: int,
-        height: int,
-        *,
-        samples: int | None = None,
-        jitter: tuple[float, float] | None = None,
-    ) -> dict[str, np.ndarray]:
-        """Render ``frame`` at ``width x height`` (sub-pixel ``jitter``: see :func:`render_passes`); the passes as
-        ``(C, H, W)`` float32 arrays, rows top-down."""
+    def set_frame(self, frame: int) -> None:
         self.pose(frame)
-        return render_passes(
-            self.scene,
-            width,
-            height,
-            samples=samples or self.samples,
-            denoise=self.denoise,
-            filter_width=self.filter_width,
-            jitter=jitter,
-        )
 
 
 def configure_cycles(scene, layer, *, seed: int, threads: int = 0) -> None:

@@ -37,6 +37,8 @@ from urllib.parse import unquote
 
 import numpy as np
 
+from wdss.render.cycles_scene import CyclesScene
+
 __all__ = ["CAMERAS", "LIGHTINGS", "SCENE_KINDS", "FileScene", "check_scene", "file_digest", "scene_resources"]
 
 log = logging.getLogger(__name__)
@@ -138,7 +140,7 @@ def _orthonormal(matrix: np.ndarray) -> np.ndarray:
     return out
 
 
-class FileScene:
+class FileScene(CyclesScene):
     """A scene file in Blender, framed by its own or a fitted camera; renders like
     :class:`wdss.render.blender.BlenderScene`. ``poses`` (frames -1..frames+1), ``lens`` and ``description``
     (for the sidecar) are known once it is built."""
@@ -453,26 +455,5 @@ class FileScene:
         return ray_cast
 
     # -- rendering -----------------------------------------------------------------------------------------------
-    def render(
-        self,
-        frame: int,
-        width: int,
-        height: int,
-        *,
-        samples: int | None = None,
-        jitter: tuple[float, float] | None = None,
-    ) -> dict[str, np.ndarray]:
-        """Render ``frame`` at ``width x height`` (sub-pixel ``jitter``: see
-        :func:`wdss.render.blender.render_passes`); the passes as ``(C, H, W)`` float32 arrays, rows top-down."""
-        from wdss.render.blender import render_passes
-
+    def set_frame(self, frame: int) -> None:
         self.scene.frame_set(self.offset + frame)
-        return render_passes(
-            self.scene,
-            width,
-            height,
-            samples=samples or self.samples,
-            denoise=self.denoise,
-            filter_width=self.filter_width,
-            jitter=jitter,
-        )

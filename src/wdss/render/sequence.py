@@ -107,9 +107,20 @@ def sampling_convention(lr_mode: str, filter_width: float, folders: Mapping[int,
 LR_MODES = ("downsample", "native", "jittered")
 
 
-def _jitter_record(lr_mode: str, frame: int) -> dict[str, list[float]]:
-    """The frame's sidecar entry for its LR sample offset: ``lr_jitter`` where the LR frames are jittered."""
-    return {"lr_jitter": list(halton_jitter(frame))} if lr_mode == "jittered" else {}
+def _lr_jitter(lr_mode: str, frame: int) -> tuple[float, float] | None:
+    """Where ``frame``'s LR pixels are shaded, from their centres: its Halton jitter where the LR frames are
+    jittered, else ``None`` (the one place both the renders and the sidecar take it from)."""
+    return halton_jitter(frame) if lr_mode == "jittered" else None
+
+
+def _frame_record(frame: int, camera_to_world: np.ndarray, lr_mode: str) -> dict[str, Any]:
+    """The frame's sidecar entry: its camera and, where the LR frames are jittered, its ``lr_jitter``."""
+    jitter = _lr_jitter(lr_mode, frame)
+    return {
+        "frame": frame,
+        "camera_to_world": camera_to_world.tolist(),
+        **({} if jitter is None else {"lr_jitter": list(jitter)}),
+    }
 
 
 def _write_json(path: Path, data: Any) -> None:
@@ -243,9 +254,7 @@ def render_sequence(
         },
         "sampling": sampling_convention(lr_mode, filter_width, {height // s: s for s in scales}),
         "scene": description,
-        "frames": [
-            {"frame": f, "camera_to_world": poses[f].tolist(), **_jitter_record(lr_mode, f)} for f in range(frames + 1)
-        ],
+        "frames": [_frame_record(f, poses[f], lr_mode) for f in range(frames + 1)],
         "render_seconds": (previous_meta or {}).get("render_seconds", {}),
         # The pre-exposure applied to the radiance of every frame (None until the probes have chosen it).
         "exposure": exposure if exposure != "auto" else (previous_meta or {}).get("exposure"),
@@ -276,7 +285,7 @@ def render_sequence(
             if lr_mode == "downsample":
                 lr = {k: point_sample(torch.from_numpy(v)[None], size)[0].numpy() for k, v in hr.items()}
             else:
-                jitter = halton_jitter(frame) if lr_mode == "jittered" else None
+                jitter = _lr_jitter(lr_mode, frame)
                 passes = scene.render(frame, size[1], size[0], samples=lr_samples, jitter=jitter)
                 lr = to_buffers(
                     passes, camera=camera_to_world, previous_camera=previous, lens=lens, motion_scale=float(s)
