@@ -44,3 +44,26 @@ def test_training_renders_its_dataset_on_first_use_then_trains_and_tests(tmp_pat
     [run] = client.search_runs([client.get_experiment_by_name("wdss").experiment_id])
     assert run.info.status == "FINISHED"
     assert {"test/psnr_2x", "test/psnr_4x", "val/psnr", "train/loss"} <= set(run.data.metrics)
+
+
+def test_a_typo_in_the_data_root_is_one_line_and_creates_nothing(tmp_path):
+    data = tmp_path / "data"
+    data.mkdir()
+    env = {**os.environ, "MLFLOW_DISABLE_TELEMETRY": "true"}
+    env.pop("MLFLOW_TRACKING_URI", None)
+    args = [f"paths.data_dir={data}", f"paths.log_dir={tmp_path}/outputs", f"data.root={data}/mnii"]
+    done = subprocess.run(
+        [sys.executable, "-m", "wdss.train", *args, f"logger.tracking_uri=sqlite:///{tmp_path}/mlflow.db"],
+        cwd=PROJECT_ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 2, done.stderr[-3000:]
+    [line] = [line for line in done.stderr.splitlines() if line.strip()]
+    assert line.startswith(f"wdss.train: data root {data}/mnii does not exist (the 'mini' dataset renders on first")
+    assert "Traceback" not in done.stderr
+    # Nothing rendered, no MLflow store, and no run folder (Hydra's own record of a refused command is removed).
+    assert not any(data.iterdir()) and not (tmp_path / "mlflow.db").exists()
+    assert not any((tmp_path / "outputs").rglob("*.yaml"))

@@ -14,12 +14,13 @@ from typing import Any
 import torch
 from omegaconf import OmegaConf
 
+from wdss.errors import UserError
 from wdss.targets import TargetRefused, check_targets
 
 __all__ = ["CheckpointError", "read_checkpoint", "training_preprocessing"]
 
 
-class CheckpointError(ValueError):
+class CheckpointError(UserError):
     """A file that is not a usable wdss checkpoint."""
 
 

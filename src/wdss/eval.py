@@ -13,13 +13,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import hydra
 import lightning as L
 import numpy as np
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.exr import write_exr
+from wdss.errors import entry_point
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
 from wdss.progress_bar import progress_bar
@@ -124,6 +124,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     _as_trained(cfg, ckpt)
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
+    datamodule.check(["test"])  # a missing data root or sequence: refused before any run starts
     logger = _eval_logger(cfg, ckpt)
     callbacks = [progress_bar()]
     if cfg.get("write_outputs"):
@@ -149,7 +150,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     return metrics
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="eval")
+@entry_point("wdss.eval", CONF_DIR, "eval")
 def main(cfg: DictConfig) -> None:
     evaluate(cfg)
 

@@ -20,7 +20,6 @@ import logging
 from pathlib import Path
 from typing import Any
 
-import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
@@ -30,6 +29,7 @@ from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.dataset import GBUFFER_STACK, Preprocessing
 from wdss.data.preprocess import LR_GUIDE
 from wdss.data.sampling import lr_size, point_sample
+from wdss.errors import UserError, entry_point
 from wdss.model.blocks import RIRBlock, fold_rir_blocks
 from wdss.model.module import SuperResolutionModule
 from wdss.model.profile import dummy_inputs
@@ -87,7 +87,7 @@ CHANNELS: dict[str, tuple[str, list[str], str]] = {
 }
 
 
-class ExportError(RuntimeError):
+class ExportError(UserError, RuntimeError):
     """A model that cannot be exported as asked, or a graph that does not match torch."""
 
 
@@ -342,7 +342,7 @@ def export(cfg: DictConfig) -> Path:
     return path
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR / "inference"), config_name="export")
+@entry_point("wdss.export", CONF_DIR / "inference", "export")
 def main(cfg: DictConfig) -> None:
     export(cfg)
 

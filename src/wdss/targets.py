@@ -20,6 +20,8 @@ from typing import Any
 from hydra.utils import instantiate as hydra_instantiate
 from omegaconf import OmegaConf
 
+from wdss.errors import UserError
+
 __all__ = ["ALLOWED", "TargetRefused", "check_targets", "instantiate", "resolve"]
 
 # Module -> the names in it that a config or checkpoint may build; a path names them through these modules.
@@ -35,7 +37,7 @@ ALLOWED: Mapping[str, tuple[str, ...]] = {
     "wdss.model.fusesr": ("FuseSR",),
     "wdss.wavelets": ("WaveletTransform",),
     "wdss.data": ("SceneDataModule",),
-    "wdss.render": ("render_preset",),
+    "wdss.render": ("RenderOnFirstUse", "render_preset"),
     "wdss.tracking": ("SweepParentRun",),
     "wdss.train": ("ValidateBeforeRun",),
     "wdss.averaging": ("EMAWeightAveraging",),
@@ -62,7 +64,7 @@ ALLOWED: Mapping[str, tuple[str, ...]] = {
 _IMPORTABLE = frozenset(".".join(m.split(".")[:end]) for m in ALLOWED for end in range(1, m.count(".") + 2))
 
 
-class TargetRefused(ValueError):
+class TargetRefused(UserError):
     """A ``_target_`` that is not on the allowlist."""
 
 

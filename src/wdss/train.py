@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import hydra
 import lightning as L
 from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
@@ -26,16 +25,13 @@ from omegaconf import DictConfig, OmegaConf
 
 from wdss.checkpoint import CheckpointError, read_checkpoint
 from wdss.distributed import use_rank_command
+from wdss.errors import ConfigError, entry_point
 from wdss.paths import CONF_DIR
 from wdss.progress_bar import progress_bar
 from wdss.targets import TargetRefused, check_targets, instantiate
 from wdss.tracking import RUN_ID_FILE, ensure_experiment, prepare_store, reap_dead_runs, run_name, run_tags
 
 __all__ = ["ConfigError", "log_noise_ceilings", "main", "train", "validate"]
-
-
-class ConfigError(ValueError):
-    """A configuration that cannot describe a valid run."""
 
 
 def _check_numbers(cfg: DictConfig) -> None:
@@ -179,7 +175,7 @@ def _flat(config: dict, prefix: str = "") -> dict[str, Any]:
 def train(cfg: DictConfig) -> dict[str, float]:
     """Fit and test one configuration; returns the final metrics (``val/*``, ``test/*``, ``bench/*``)."""
     validate(cfg)
-    L.seed_everything(int(cfg.seed), workers=True)
+    L.seed_everything(int(cfg.seed), workers=True, verbose=False)
     output_dir = Path(str(cfg.paths.output_dir))
     output_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path, resume_run = _resume(cfg)
@@ -192,6 +188,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
             "on these frames (fit=true); numbers from random weights are never reported"
         )
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
+    datamodule.check()  # a missing data root or sequence: refused before any run starts
     name = run_name(cfg)
     multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
     callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [progress_bar(multirun=multirun)]
@@ -336,7 +333,7 @@ class ValidateBeforeRun(Callback):
             raise SystemExit(2) from err
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="train")
+@entry_point("wdss.train", CONF_DIR, "train")
 def main(cfg: DictConfig) -> float | None:
     metrics = train(cfg)
     output_dir = cfg.paths.output_dir

@@ -20,6 +20,7 @@ file's name, or, with ``on_error=skip``, is reported and left out.
 
 from __future__ import annotations
 
+from wdss.errors import UserError, entry_point
 from wdss.memory import restart_with_retained_memory
 
 if __name__ == "__main__":
@@ -35,7 +36,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
@@ -65,7 +65,7 @@ SHOWN = ("psnr", "ssim", "flip")  # printed per frame (every metric is recorded)
 _READ_ERRORS = (SceneError, ExrError, OSError)
 
 
-class UpscaleError(ValueError):
+class UpscaleError(UserError):
     """An upscale that cannot run as asked."""
 
 
@@ -318,7 +318,7 @@ def _summary(record: Record, seq: Sequence, scale: float, out_dir: Path, frames:
     return means
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR / "inference"), config_name="upscale")
+@entry_point("wdss.upscale", CONF_DIR / "inference", "upscale")
 def main(cfg: DictConfig) -> None:
     upscale(cfg)
 

@@ -295,14 +295,52 @@ def test_the_default_data_config_instantiates():
     from hydra.utils import instantiate
 
     from wdss.paths import CONF_DIR
-    from wdss.render import render_preset
+    from wdss.render import RenderOnFirstUse
 
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose("train", overrides=["data=mini", "paths.root_dir=/project"])
     dm = instantiate(cfg.data, inputs=["lr", "target"])
     assert isinstance(dm, SceneDataModule) and dm.inputs == ("lr", "target") and dm.scale == (2.0, 4.0)
     assert str(dm.root) == "/project/data/mini"
-    assert dm.prepare.func is render_preset and dm.prepare.keywords == {"name": "mini"}
+    assert isinstance(dm.prepare, RenderOnFirstUse) and dm.prepare.name == "mini"
+    assert dm.prepare.home == Path("/project/data/mini") and not dm.prepare.anywhere
+
+
+@pytest.mark.parametrize("preset", ["mini", "tiny", "bench", "bench_jittered"])
+def test_a_typo_in_data_root_renders_nothing_and_names_the_root(tmp_path, monkeypatch, preset):
+    from hydra import compose, initialize_config_dir
+    from hydra.utils import instantiate
+
+    from wdss.paths import CONF_DIR
+    from wdss.render import sequence
+
+    rendered = []
+    monkeypatch.setattr(sequence, "render_preset", lambda root, name: rendered.append((root, name)))
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        home = compose("train", overrides=[f"data={preset}", f"paths.root_dir={tmp_path}"])
+        typo = compose("train", overrides=[f"data={preset}", f"paths.root_dir={tmp_path}", "data.root=data/mnii"])
+        anywhere = compose(
+            "train",
+            overrides=[f"data={preset}", f"paths.root_dir={tmp_path}", "data.root=data/mnii"]
+            + ["data.prepare.anywhere=true"],
+        )
+    dm = instantiate(typo.data, inputs=["lr", "target"])
+    with pytest.raises(SceneError, match=rf"^data root data/mnii does not exist \(the '{preset}' dataset renders on "):
+        dm.check()
+    with pytest.raises(SceneError, match="data.prepare.anywhere=true"):
+        dm.prepare_data()
+    assert rendered == [] and not (tmp_path / "data").exists()
+    instantiate(anywhere.data, inputs=["lr", "target"]).check()  # asked for: rendered there
+    dm = instantiate(home.data, inputs=["lr", "target"])
+    dm.check()
+    dm.prepare_data()  # its own folder renders on first use
+    assert rendered == [(tmp_path / "data" / preset, preset)]
+
+
+def test_a_missing_root_with_nothing_to_make_it_is_refused_by_name(tmp_path):
+    dm = SceneDataModule(tmp_path / "nowhere", {"train": ["seq_a"]}, ["target"], patch_size=None)
+    with pytest.raises(SceneError, match=r"^data root .*nowhere does not exist$"):
+        dm.check()
 
 
 def test_sequences_share_one_patch_and_scale_across_steps(root):
@@ -514,3 +552,14 @@ def test_prepare_data_resumes_a_render_stopped_part_way_and_never_renders_into_o
     write_sequence(tmp_path / "mine" / "seq_a", frames=(1, 2), size=(8, 8), scales=())  # no wdss render record
     SceneDataModule(tmp_path / "mine", {"train": ["seq_a", "typo"]}, ["target"], prepare=calls.append).prepare_data()
     assert calls == [root]
+
+
+def test_a_split_naming_a_missing_sequence_is_refused_with_the_syntax(root):
+    dm = SceneDataModule(root, {"train": ["seq_a"], "test": ["seq_b", "nope"]}, ["target"], patch_size=None)
+    dm.check(["train"])  # only the splits asked about
+    with pytest.raises(SceneError, match=r"^data.splits.test: 'nope' not under .* \(it holds: .*seq_a.*\); name "):
+        dm.check()
+    with pytest.raises(SceneError, match=r"data.test_root .*elsewhere is not a folder"):
+        SceneDataModule(root, {"test": ["seq_b"]}, ["target"], patch_size=None, test_root=root / "elsewhere").check(
+            ["test"]
+        )

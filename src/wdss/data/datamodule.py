@@ -66,6 +66,7 @@ from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing
 from wdss.data.layouts import OPTIONAL_BUFFERS, SceneError, Sequence, discover_sequences
 from wdss.data.packed import PackedSequence, discover_packed, is_packed
 from wdss.data.preprocess import RawBatch
+from wdss.errors import ConfigError
 
 __all__ = ["SceneDataModule"]
 
@@ -88,7 +89,7 @@ def _parse_split(entries: Iterable[Any]) -> tuple[list[str], dict[str, tuple[int
                 start, stop = entry["frames"]
                 ranges[str(entry["name"])] = (int(start), int(stop))
         else:
-            raise ValueError(f"data.splits entries are names or {{name, frames: [start, stop]}}, got {entry!r}")
+            raise ConfigError(f"data.splits entries are names or {{name, frames: [start, stop]}}, got {entry!r}")
     return names, ranges
 
 
@@ -155,16 +156,16 @@ class SceneDataModule(L.LightningDataModule):
     ) -> None:
         super().__init__()
         if format not in FORMATS:
-            raise ValueError(f"data.format must be one of {', '.join(FORMATS)}, got {format!r}")
+            raise ConfigError(f"data.format must be one of {', '.join(FORMATS)}, got {format!r}")
         if preprocess_on not in PLACEMENTS:
-            raise ValueError(f"data.preprocess_on must be one of {', '.join(PLACEMENTS)}, got {preprocess_on!r}")
+            raise ConfigError(f"data.preprocess_on must be one of {', '.join(PLACEMENTS)}, got {preprocess_on!r}")
         self.root = Path(root)
         self.format = format
         self.packed_root = Path(packed_root) if packed_root else self.root.with_name(f"{self.root.name}.packed")
         self.preprocess_on = preprocess_on
         unknown = set(splits) - set(SPLITS)
         if unknown:
-            raise ValueError(f"data.splits has unknown split(s) {sorted(unknown)}: expected train, val, test")
+            raise ConfigError(f"data.splits has unknown split(s) {sorted(unknown)}: expected train, val, test")
         self.splits = {name: _parse_split(entries) for name, entries in splits.items()}
         self.inputs = tuple(inputs)
         self.test_inputs = self.inputs if test_inputs is None else tuple(test_inputs)
@@ -191,7 +192,7 @@ class SceneDataModule(L.LightningDataModule):
         self.seed = seed
         self.prepare = prepare
         if isinstance(cache_mb, bool) or not isinstance(cache_mb, int) or cache_mb < 0:
-            raise ValueError(f"data.cache_mb must be an integer >= 0 (0: no cache), got {cache_mb!r}")
+            raise ConfigError(f"data.cache_mb must be an integer >= 0 (0: no cache), got {cache_mb!r}")
         # EXR sequences share one budget per process (each loader worker holds its own cache).
         self.cache = FrameCache(cache_mb * 2**20) if cache_mb else None
         self.datasets: dict[str, Any] = {}
@@ -202,6 +203,40 @@ class SceneDataModule(L.LightningDataModule):
             choices = sorted(scale["choices"])
             return choices[len(choices) // 2]
         return float(scale) if not isinstance(scale, tuple) else round(sum(scale) / 2, 3)
+
+    def check(self, splits: Iterable[str] = SPLITS) -> None:
+        """Refuse, before anything is created, a ``root`` that does not exist and that ``prepare`` will not make
+        (none given, or one that refuses this folder: :meth:`wdss.render.RenderOnFirstUse.refusal`), and one of
+        ``splits`` that names a sequence the data does not hold (unless a render here will make it)."""
+        if self.format != "packed" and not self.root.exists():
+            if self.prepare is None:
+                raise SceneError(f"data root {self.root} does not exist")
+            refusal = getattr(self.prepare, "refusal", None)
+            why = refusal(self.root) if refusal is not None else None
+            if why:
+                raise SceneError(why)
+            return  # rendered on first use
+        resumable = self.prepare is not None and any(self.root.glob("*/sequence.json"))
+        for split, (names, _) in self.splits.items():
+            if split not in splits:
+                continue
+            root = self.test_root if split == "test" and self.test_root is not None else self.root
+            if self.format == "packed" and not (split == "test" and self.test_root is not None):
+                root = self.packed_root
+            elif root == self.root and resumable:
+                continue  # a render of this dataset that stopped part-way resumes (prepare_data)
+            if not root.is_dir():
+                key = "data.test_root" if root == self.test_root else "data.packed_root"
+                raise SceneError(f"{key} {root} is not a folder")
+            missing = [n for n in names if not (root / n).exists() and not (root / f"{n}.zip").exists()]
+            if missing:
+                held = sorted(p.name for p in root.iterdir() if p.is_dir() or p.suffix == ".zip")
+                shown = ", ".join(held[:10]) + (f", ... ({len(held)} in all)" if len(held) > 10 else "")
+                raise SceneError(
+                    f"data.splits.{split}: {', '.join(map(repr, missing))} not under {root} (it holds: "
+                    f"{shown or 'no sequence folders'}); name the sequences as data.splits.{split}=[name,...] "
+                    f"(or [{{name: a, frames: [start, stop]}}])"
+                )
 
     def prepare_data(self) -> None:
         # A packed store is read without its EXR source: nothing to render for it.

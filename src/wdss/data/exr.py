@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 
+from wdss.errors import UserError
+
 __all__ = ["COMPRESSIONS", "ExrError", "read_exr", "read_exr_size", "write_exr"]
 
 COMPRESSIONS = {
@@ -24,7 +26,7 @@ COMPRESSIONS = {
 }
 
 
-class ExrError(ValueError):
+class ExrError(UserError):
     """An EXR file that cannot be read as asked: missing, corrupt, or without a needed channel."""
 
 

@@ -41,6 +41,7 @@ from wdss.data.cache import FrameCache
 from wdss.data.exr import read_exr, read_exr_size
 from wdss.data.preprocess import depth_range as frame_depth_range
 from wdss.data.sampling import crop
+from wdss.errors import UserError
 
 __all__ = [
     "BUFFERS",
@@ -79,7 +80,7 @@ log = logging.getLogger(__name__)
 _FRAME_FILE = re.compile(r"^(?P<stem>.+)\.(?P<frame>\d+)\.exr$")
 
 
-class SceneError(ValueError):
+class SceneError(UserError):
     """A scene that does not hold what was asked of it: missing buffer, frame, file, channel or size."""
 
 

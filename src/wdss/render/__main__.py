@@ -12,13 +12,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import hydra
 from omegaconf import DictConfig, OmegaConf
 
+from wdss.errors import entry_point
 from wdss.paths import CONF_DIR
 
 
-@hydra.main(version_base="1.3", config_path=str(CONF_DIR / "render"), config_name="default")
+@entry_point("wdss.render", CONF_DIR / "render", "default")
 def main(cfg: DictConfig) -> None:
     from wdss.render.preview import preview
     from wdss.render.sequence import render_sequences

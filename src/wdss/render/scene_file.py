@@ -37,6 +37,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
+from wdss.errors import ConfigError
 from wdss.render.cycles_scene import CyclesScene
 
 __all__ = ["CAMERAS", "LIGHTINGS", "SCENE_KINDS", "FileScene", "check_scene", "file_digest", "scene_resources"]
@@ -52,17 +53,17 @@ def check_scene(scene: str | Path | None, camera: str, lighting: str, *, where: 
     """The resolved scene file (None for a procedural scene) after checking the ``scene``, ``camera`` and
     ``lighting`` settings of one sequence (``where``, e.g. ``"sequence 'a'"``, goes into the errors)."""
     if camera not in CAMERAS:
-        raise ValueError(f"render.camera ({where}) must be one of {', '.join(CAMERAS)}; got {camera!r}")
+        raise ConfigError(f"render.camera ({where}) must be one of {', '.join(CAMERAS)}; got {camera!r}")
     if lighting not in LIGHTINGS:
-        raise ValueError(f"render.lighting ({where}) must be one of {', '.join(LIGHTINGS)}; got {lighting!r}")
+        raise ConfigError(f"render.lighting ({where}) must be one of {', '.join(LIGHTINGS)}; got {lighting!r}")
     if scene is None:
         if camera in ("file", "fly") or lighting == "file":
             setting = f"camera={camera}" if camera in ("file", "fly") else f"lighting={lighting}"
-            raise ValueError(f"render.{setting} ({where}) needs a scene file: set render.scene")
+            raise ConfigError(f"render.{setting} ({where}) needs a scene file: set render.scene")
         return None
     path = Path(str(scene)).expanduser()
     if path.suffix.lower() not in SCENE_KINDS:
-        raise ValueError(f"render.scene ({where}): {path} is not a scene file wdss reads ({', '.join(SCENE_KINDS)})")
+        raise ConfigError(f"render.scene ({where}): {path} is not a scene file wdss reads ({', '.join(SCENE_KINDS)})")
     if not path.is_file():
         raise FileNotFoundError(f"render.scene ({where}): {path} does not exist")
     for uri, resource in scene_resources(path, where=f"render.scene ({where})"):
@@ -84,9 +85,9 @@ def _gltf_json(path: Path, where: str) -> dict[str, Any]:
                 text = handle.read()
         gltf = json.loads(text.decode("utf-8-sig"))
     except (struct.error, UnicodeDecodeError, ValueError) as err:
-        raise ValueError(f"{where}: {path} could not be read: {err}") from err
+        raise ConfigError(f"{where}: {path} could not be read: {err}") from err
     if not isinstance(gltf, dict):
-        raise ValueError(f"{where}: {path} could not be read: its JSON is not an object")
+        raise ConfigError(f"{where}: {path} could not be read: its JSON is not an object")
     return gltf
 
 
@@ -178,7 +179,7 @@ class FileScene(CyclesScene):
                 else:
                     bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
         except RuntimeError as err:
-            raise ValueError(f"{where} could not be read: {str(err).strip()}") from err
+            raise ConfigError(f"{where} could not be read: {str(err).strip()}") from err
         scene = self.scene = bpy.context.scene
         layer = bpy.context.view_layer
         self._show_what_renders(layer)
@@ -187,7 +188,7 @@ class FileScene(CyclesScene):
         scene.frame_set(self.offset)
         geometry, bounds = self._geometry()
         if bounds is None:
-            raise ValueError(f"{where} has no mesh to render")
+            raise ConfigError(f"{where} has no mesh to render")
         lo, hi = bounds
         for other in scene.view_layers:
             other.use = other == layer
@@ -363,7 +364,7 @@ class FileScene(CyclesScene):
         mode = camera if camera != "auto" else ("file" if moving else "orbit")
         if mode == "file":
             if own is None:
-                raise ValueError(f"{where} has no camera (render.camera=file): use camera=orbit or camera=fly")
+                raise ConfigError(f"{where} has no camera (render.camera=file): use camera=orbit or camera=fly")
             self.lens = self._pinhole(own, frames, width, height, where)
             self.poses = file_poses
             scene.camera = own
@@ -389,7 +390,7 @@ class FileScene(CyclesScene):
             )
         except ValueError as err:
             hint = "camera=fly walks through interiors" if mode == "orbit" else "camera=orbit circles the scene"
-            raise ValueError(f"{where}: render.camera={mode}: {err}; {hint}") from err
+            raise ConfigError(f"{where}: render.camera={mode}: {err}; {hint}") from err
         data.lens = self.lens = path.lens
         for f, pose in poses.items():
             obj.matrix_world = Matrix(pose.tolist())
@@ -411,14 +412,14 @@ class FileScene(CyclesScene):
 
         data = obj.data
         if data.type != "PERSP":
-            raise ValueError(f"{where}: camera {obj.name!r} is {data.type}; wdss renders perspective cameras")
+            raise ConfigError(f"{where}: camera {obj.name!r} is {data.type}; wdss renders perspective cameras")
         depsgraph = bpy.context.evaluated_depsgraph_get()
         focals = {
             round(obj.evaluated_get(depsgraph).calc_matrix_camera(depsgraph, x=width, y=height)[0][0] * width / 2, 4)
             for _ in self._each_frame(frames)
         }
         if len(focals) > 1:
-            raise ValueError(f"{where}: camera {obj.name!r} zooms (its focal length is animated); use camera=orbit")
+            raise ConfigError(f"{where}: camera {obj.name!r} zooms (its focal length is animated); use camera=orbit")
         if data.shift_x or data.shift_y:
             log.warning("%s: camera %r has a lens shift; wdss renders it centred", where, obj.name)
         # A keyed or driven lens, sensor or shift (even one that holds still) would undo what is set below at

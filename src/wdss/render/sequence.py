@@ -29,14 +29,16 @@ import torch
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from wdss.data.exr import write_exr
-from wdss.data.layouts import UnrealLayout
+from wdss.data.layouts import SceneError, UnrealLayout
 from wdss.data.sampling import JITTER_PHASES, halton_jitter, lr_size, point_sample
+from wdss.errors import ConfigError
 from wdss.progress import duration
 from wdss.render.exposure import auto_exposure
 from wdss.render.scene_file import check_scene, file_digest
 from wdss.render.spec import SceneSpec, camera_pose, intrinsics, random_scene
 
 __all__ = [
+    "RenderOnFirstUse",
     "frame_files",
     "preset_settings",
     "render_preset",
@@ -168,16 +170,16 @@ def render_sequence(
 
     scene_path = check_scene(scene, camera, lighting, where=f"sequence {name!r}")
     if scene_path is not None and spec is not None:
-        raise ValueError(f"sequence {name!r}: give a procedural spec or a scene file (render.scene), not both")
+        raise ConfigError(f"sequence {name!r}: give a procedural spec or a scene file (render.scene), not both")
     if lr_mode not in LR_MODES:
-        raise ValueError(f"render.lr_mode must be one of {', '.join(LR_MODES)}, got {lr_mode!r}")
+        raise ConfigError(f"render.lr_mode must be one of {', '.join(LR_MODES)}, got {lr_mode!r}")
     width, height = resolution
     scales = [int(s) for s in scales]
     if exposure != "auto" and not (isinstance(exposure, (int, float)) and exposure > 0):
-        raise ValueError(f"render.exposure must be 'auto' or a positive number, got {exposure!r}")
+        raise ConfigError(f"render.exposure must be 'auto' or a positive number, got {exposure!r}")
     for s in scales:
         if width % s or height % s:
-            raise ValueError(f"render.resolution {width}x{height} is not divisible by scale {s}")
+            raise ConfigError(f"render.resolution {width}x{height} is not divisible by scale {s}")
     folder = Path(out_dir) / name
     heights = [height] + [height // s for s in scales]
     settings = {
@@ -202,7 +204,7 @@ def render_sequence(
     sidecar = folder / "sequence.json"
     previous_meta = json.loads(sidecar.read_text()) if sidecar.exists() else None
     if previous_meta and (previous_meta.get("seed") != seed or previous_meta.get("settings") != settings):
-        raise ValueError(
+        raise ConfigError(
             f"{folder} holds a sequence rendered with other settings (seed {previous_meta.get('seed')}); "
             "remove it or render into another folder"
         )
@@ -332,17 +334,17 @@ def render_sequences(out_dir: str | Path, sequences: Iterable[Mapping[str, Any]]
     keys = _SETTINGS
     unknown = sorted(set(settings) - keys)
     if unknown:
-        raise ValueError(f"render: unknown setting(s) {', '.join(unknown)}; known: {', '.join(sorted(keys))}")
+        raise ConfigError(f"render: unknown setting(s) {', '.join(unknown)}; known: {', '.join(sorted(keys))}")
     names: set[str] = set()
     for index, seq in enumerate(sequences):
         if "name" not in seq or "seed" not in seq:
-            raise ValueError(f"render.sequences[{index}] needs a name and a seed; got {seq}")
+            raise ConfigError(f"render.sequences[{index}] needs a name and a seed; got {seq}")
         where = f"sequence {seq['name']!r}"
         unknown = sorted(set(seq) - keys - {"name", "seed"})
         if unknown:
-            raise ValueError(f"render.sequences[{index}] ({where}): unknown key(s) {', '.join(unknown)}")
+            raise ConfigError(f"render.sequences[{index}] ({where}): unknown key(s) {', '.join(unknown)}")
         if seq["name"] in names:
-            raise ValueError(f"render.sequences[{index}]: {where} appears twice (one folder each)")
+            raise ConfigError(f"render.sequences[{index}]: {where} appears twice (one folder each)")
         names.add(seq["name"])
         merged = {**settings, **seq}
         check_scene(merged.get("scene"), merged.get("camera", "auto"), merged.get("lighting", "auto"), where=where)
@@ -460,3 +462,29 @@ def render_preset(out_dir: str | Path, name: str = "mini") -> list[Path]:
         settings.pop(key, None)
     print(f"wdss: rendering the {name!r} dataset into {out_dir} (Blender Cycles on the CPU; resumable)", flush=True)
     return render_sequences(out_dir, settings.pop("sequences"), **settings)
+
+
+class RenderOnFirstUse:
+    """A DataModule's ``prepare`` (``data.prepare``): render the preset ``conf/render/<name>.yaml`` into the
+    dataset's own folder ``home`` when it does not exist yet, or resume that render. A ``data.root`` elsewhere that
+    does not exist is refused (:meth:`refusal`), so that a typo renders nothing; ``anywhere=True`` renders the
+    preset into any ``data.root``."""
+
+    def __init__(self, name: str = "mini", home: str | Path | None = None, anywhere: bool = False) -> None:
+        self.name, self.home, self.anywhere = name, None if home is None else Path(home), bool(anywhere)
+
+    def refusal(self, root: str | Path) -> str | None:
+        """Why ``root`` is not rendered into (None: it is), checked before anything is created."""
+        root = Path(root)
+        if root.exists() or self.anywhere or self.home is None or root.resolve() == self.home.resolve():
+            return None
+        return (
+            f"data root {root} does not exist (the {self.name!r} dataset renders on first use only into "
+            f"{self.home}; to render it into {root}: data.prepare.anywhere=true)"
+        )
+
+    def __call__(self, root: str | Path) -> list[Path]:
+        why = self.refusal(root)
+        if why:
+            raise SceneError(why)
+        return render_preset(root, self.name)

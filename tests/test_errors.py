@@ -1,0 +1,72 @@
+"""The entry points' error contract (wdss.errors): input a user can fix is one line on stderr and exit status 2;
+anything else keeps its traceback."""
+
+from __future__ import annotations
+
+import pytest
+
+from wdss.checkpoint import CheckpointError
+from wdss.data.exr import ExrError
+from wdss.data.layouts import SceneError
+from wdss.errors import ConfigError, UserError, one_line_errors
+from wdss.export import ExportError
+from wdss.targets import TargetRefused
+from wdss.upscale import UpscaleError
+
+
+@pytest.mark.parametrize(
+    "error", [ConfigError, SceneError, ExrError, CheckpointError, TargetRefused, UpscaleError, ExportError]
+)
+def test_every_user_error_is_one_line_and_status_2(capsys, error):
+    @one_line_errors("wdss.thing")
+    def main(key: str) -> None:
+        raise error(f"{key}: 'mnii' is not a dataset")
+
+    with pytest.raises(SystemExit) as exit_:
+        main("data.root")
+    assert exit_.value.code == 2 and issubclass(error, UserError)
+    out, err = capsys.readouterr()
+    assert out == "" and err == "wdss.thing: data.root: 'mnii' is not a dataset\n"
+
+
+def test_a_bug_keeps_its_traceback_and_a_result_passes_through():
+    @one_line_errors("wdss.thing")
+    def main(fail: bool) -> float:
+        if fail:
+            raise KeyError("a bug")
+        return 1.5
+
+    assert main(False) == 1.5
+    with pytest.raises(KeyError, match="a bug"):
+        main(True)
+
+
+@pytest.mark.parametrize(
+    ("argv", "line"),
+    [
+        (["data.rooot=x"], "wdss.train: unknown config key data.rooot (did you mean data.root?)"),
+        (["data=tiny", "trainer.max_epoch=3"], "wdss.train: unknown config key trainer.max_epoch (did you mean "),
+        (["dtaa.root=x"], "wdss.train: unknown config key dtaa (did you mean data?)"),
+        (["model.net.zzzz=1"], "wdss.train: unknown config key model.net.zzzz (model.net has: _target_, "),
+    ],
+)
+def test_a_mistyped_key_names_the_closest_keys_not_plus_key(capsys, argv, line):
+    from wdss.errors import check_overrides
+    from wdss.paths import CONF_DIR
+
+    with pytest.raises(SystemExit) as exit_:
+        check_overrides("wdss.train", CONF_DIR, "train", argv)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(line) and err.count("\n") == 1 and "+" not in err
+
+
+def test_valid_overrides_and_hydra_flags_pass_to_hydra(capsys):
+    from wdss.errors import check_overrides
+    from wdss.paths import CONF_DIR
+
+    check_overrides("wdss.train", CONF_DIR, "train", ["data=tiny", "trainer.max_epochs=3", "+extra=1"])
+    check_overrides("wdss.train", CONF_DIR, "train", ["-m", "data.rooot=1,2"])  # a sweep: Hydra's to report
+    check_overrides("wdss.render", CONF_DIR / "render", "default", ["-cn", "mini", "frames=3"])
+    check_overrides("wdss.train", CONF_DIR, "train", ["data=nonexistent"])  # Hydra lists the group's options
+    assert capsys.readouterr().err == ""
