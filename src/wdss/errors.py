@@ -130,7 +130,11 @@ def check_overrides(command: str, config_dir: str | Path, config_name: str, argv
         composed(overrides)
     except ConfigCompositionException as err:
         cause = err.__cause__
-        if not (isinstance(cause, ConfigAttributeError | ConfigKeyError) and "not in struct" in str(cause) and cause.full_key):
+        if not (
+            isinstance(cause, ConfigAttributeError | ConfigKeyError)
+            and "not in struct" in str(cause)
+            and cause.full_key
+        ):
             return
         key = str(cause.full_key)
         rest = [o for o in overrides if not f"{o.partition('=')[0].lstrip('~+')}.".startswith(f"{key}.")]

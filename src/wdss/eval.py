@@ -24,7 +24,7 @@ from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
 from wdss.progress_bar import progress_bar
 from wdss.targets import check_targets, instantiate
-from wdss.tracking import RUN_ID_FILE, ensure_experiment, prepare_store
+from wdss.tracking import GROUPS, RUN_ID_FILE, data_tags, ensure_experiment, prepare_store
 
 __all__ = ["WritePredictions", "evaluate", "main"]
 
@@ -74,7 +74,7 @@ def _eval_logger(cfg: DictConfig, ckpt: Path) -> Any:
     prepare_store(uri)
     client = MlflowClient(uri)
     training = training_run_id(ckpt)
-    tags = {"ckpt_path": str(ckpt.resolve())}
+    tags = {"ckpt_path": str(ckpt.resolve()), **data_tags(cfg)}
     experiment_name = str(cfg.experiment_name)
     if training is None:
         folder = ckpt.resolve().parent.parent
@@ -92,9 +92,17 @@ def _eval_logger(cfg: DictConfig, ckpt: Path) -> Any:
             )
         else:
             tags["mlflow.parentRunId"] = training
+            # What was trained (variant, model, seed, ...), so that a report groups evaluations as their trainings.
+            tags.update({k: v for k, v in run.data.tags.items() if k in (*GROUPS, "seed") and k != "data"})
+            tags["overrides"] = run.data.tags.get("overrides") or run.info.run_name or ""
             experiment_name = client.get_experiment(run.info.experiment_id).name  # the UI nests within one
     ensure_experiment(client, experiment_name)
-    return instantiate(cfg.logger, experiment_name=experiment_name, run_name=f"eval {ckpt.name}", tags=tags)
+    return instantiate(
+        cfg.logger,
+        experiment_name=experiment_name,
+        run_name=f"eval {ckpt.name} · {tags.get('data_root', '')}",
+        tags=tags,
+    )
 
 
 def _command_line_keys() -> set[str]:

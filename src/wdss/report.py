@@ -1,10 +1,13 @@
-"""Paper-style reports from MLflow runs: ``python -m wdss.report --sweep NAME`` (or ``--parent RUN_ID``).
+"""Paper-style reports from MLflow runs: ``python -m wdss.report --sweep NAME`` (or ``--parent RUN_ID``), or for
+any runs: ``--runs ID [ID ...]`` or ``--experiment NAME [--filter "tags.model = 'joint_bilateral'"]``.
 
-Reads the jobs of a sweep (the runs nested under its parent run) and writes, into
-``outputs/reports/<sweep>/`` and as artifacts of the parent run:
+Reads the jobs of a sweep (the runs nested under its parent run), or the runs named, and writes, into
+``outputs/reports/<sweep>/`` (``--name``; ``runs`` or the experiment's name for ad-hoc runs) and, for a sweep, as
+artifacts of the parent run:
 
-* ``table.md``: one compact table as the paper prints it: a row per configuration (the sweep's axes other than
-  the seed, named as the paper names its rows: ``SWT-db4``, ``No wavelet``, ``Bilinear (demod.)``), PSNR, SSIM,
+* ``table.md``: one compact table as the paper prints it: a row per configuration and data (the sweep's axes other
+  than the seed, and the data root where the runs read several; named as the paper names its rows: ``SWT-db4``,
+  ``No wavelet``, ``Bilinear (demod.)``), PSNR, SSIM,
   FLIP (and LPIPS when logged) and the temporal stability (the warping error's ratio to the target's own, best
   closest to 1, and the temporal PSNR; :mod:`wdss.model.temporal_metrics`) at the table's scale, each
   ``mean ± half-width`` of the 95% t-interval over the ``n`` seeds (``n/a`` with one seed), the best of each
@@ -33,7 +36,7 @@ from collections import Counter, defaultdict
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["collect", "main", "report"]
+__all__ = ["collect", "find_runs", "main", "report"]
 
 # The compact table's columns: metric, heading, decimals, higher is better (None: closest to 1 is, for a ratio to
 # the ground truth). Cost columns stand in for the quality ones in a sweep that tests nothing (the runtime figure).
@@ -111,7 +114,8 @@ def find_parent(client, sweep: str | None = None, parent: str | None = None):
 
 def overrides(run) -> dict[str, str]:
     """A job's Hydra overrides, read back from its run name (the job's ``override_dirname``); {} for a custom name."""
-    name = run.data.tags.get("mlflow.runName", "")
+    # An evaluation carries its training run's overrides (tag ``overrides``, wdss.eval): it is a row of that training.
+    name = run.data.tags.get("overrides") or run.data.tags.get("mlflow.runName", "")
     items = [item.split("=", 1) for item in _ITEM.split(name)] if name else []
     if not items or any(len(item) != 2 for item in items):
         return {}
@@ -147,17 +151,66 @@ def configuration(run, axes: Sequence[str]) -> str:
 
 
 def group(runs: Sequence) -> dict[str, list]:
-    """The jobs of each configuration, rows in the order their first job started."""
+    """The jobs of each configuration, rows in the order their first job started; where the runs read several data
+    roots (tag ``data_root``), each row is also one data root."""
     axes = sweep_axes(runs)
+    several = len({_tags(run).get("data_root") for run in runs}) > 1
     groups: dict[str, list] = defaultdict(list)
     for run in sorted(runs, key=lambda r: r.info.start_time):
-        groups[configuration(run, axes)].append(run)
+        label = configuration(run, [a for a in axes if not (several and a == "data.root")])
+        if several:
+            label += f" · {_tags(run).get('data_root', 'unknown data')}"
+        groups[label].append(run)
+    if several:  # the rows of one data root together
+        return dict(sorted(groups.items(), key=lambda item: _tags(item[1][0]).get("data_root", "")))
     return dict(groups)
 
 
 def collect(client, parent_id: str) -> list:
     experiment = client.get_run(parent_id).info.experiment_id
     return client.search_runs([experiment], filter_string=f"tags.mlflow.parentRunId = '{parent_id}'")
+
+
+def _reported(run) -> bool:
+    """A run with something to report: test metrics or a benchmark (not a sweep's parent, not a bare training)."""
+    return any(key.startswith(("test/", "bench/")) for key in run.data.metrics)
+
+
+def find_runs(client, ids: Sequence[str] = (), experiment: str | None = None, filter_string: str = "") -> list:
+    """The runs named by id, or those of an experiment that match an MLflow filter; runs without test or bench
+    metrics (sweep parents, trainings stopped before testing) are left out."""
+    from mlflow.exceptions import MlflowException
+
+    if ids:
+        runs = []
+        for run_id in ids:
+            try:
+                runs.append(client.get_run(run_id))
+            except MlflowException:
+                raise SystemExit(f"wdss.report: no run {run_id} in {client.tracking_uri}") from None
+    else:
+        found = client.get_experiment_by_name(experiment)
+        if found is None:
+            names = ", ".join(e.name for e in client.search_experiments())
+            raise SystemExit(f"wdss.report: no experiment {experiment!r} in {client.tracking_uri} (it has: {names})")
+        runs = client.search_runs([found.experiment_id], filter_string=filter_string, max_results=5000)
+    reported = [run for run in runs if _reported(run)]
+    if not reported:
+        raise SystemExit("wdss.report: none of these runs has test or bench metrics")
+    return reported
+
+
+def check_one_dataset(parent_run, runs: Sequence) -> None:
+    """Refuse to average a parent's children as seeds when they evaluated different data (a training run whose
+    evaluations read other scenes): ``--runs`` reports them with a row per data root."""
+    roots = Counter(_tags(run).get("data_root", "unknown") for run in runs)
+    if len(roots) > 1:
+        listed = ", ".join(f"{root} ({n} run{'s' * (n > 1)})" for root, n in sorted(roots.items()))
+        ids = " ".join(run.info.run_id for run in runs)
+        raise SystemExit(
+            f"wdss.report: the runs under {parent_run.info.run_id} read different data ({listed}); they are not "
+            f"seeds of one row: python -m wdss.report --runs {ids}"
+        )
 
 
 def interval(values: list[float]) -> tuple[float, float]:
@@ -274,8 +327,12 @@ def _score(value: float, higher: bool | None) -> float:
     return value if higher else -value
 
 
-def compact_table(rows: Sequence[str], metrics, notes: dict[str, str], columns, scales: Sequence[str]) -> str:
-    """The paper-style markdown table: ``mean ± half-width`` (``n/a`` with one seed), the best per column bold."""
+def compact_table(
+    rows: Sequence[str], metrics, notes: dict[str, str], columns, scales: Sequence[str], blocks=None
+) -> str:
+    """The paper-style markdown table: ``mean ± half-width`` (``n/a`` with one seed), the best per column bold
+    (among the rows of one block, ``blocks[row]``: rows of different data are not compared)."""
+    blocks = blocks or {}
     cells: dict[str, list[str]] = {row: [] for row in rows}
     for key, _, decimals, higher in columns:
         means: dict[str, float] = {}
@@ -290,9 +347,11 @@ def compact_table(rows: Sequence[str], metrics, notes: dict[str, str], columns, 
                 half_text = _fixed(half, decimals) if n > 1 and math.isfinite(half) else "n/a"
                 cells[row].append(f"{mean:.{decimals}f} ± {half_text}")
                 means[row] = round(mean, decimals)
-        if len(means) > 1:  # bold the best shown value, ties included
-            score = {row: _score(mean, higher) for row, mean in means.items()}
-            best = max(score.values())
+        for block in {blocks.get(row) for row in means}:
+            score = {row: _score(mean, higher) for row, mean in means.items() if blocks.get(row) == block}
+            if len(score) < 2:
+                continue
+            best = max(score.values())  # bold the best shown value, ties included
             for row, value in score.items():
                 if value == best:
                     cells[row][-1] = f"**{cells[row][-1]}**"
@@ -603,21 +662,33 @@ def report(
     sweep: str | None = None,
     parent: str | None = None,
     *,
+    runs: Sequence[str] = (),
+    experiment: str | None = None,
+    filter_string: str = "",
+    name: str | None = None,
     tracking_uri: str | None = None,
     out_dir: str | Path = "outputs/reports",
     scale: str | None = None,
 ) -> Path:
-    """Write the sweep's table, trade-off plot and qualitative figure; log them on the parent run.
+    """Write the table, trade-off plot and qualitative figure of a sweep (``sweep`` or ``parent``; logged on the
+    parent run too) or of any runs (``runs`` by id, or ``experiment`` with an MLflow ``filter_string``).
 
     ``scale``: the table's and the plots' scale (``3x``, or ``avg`` over the tested scales); by default the
     sweep's only test scale, else its paper table's (``PAPER_SCALES``).
     """
     client = _client(tracking_uri)
-    parent_run = find_parent(client, sweep, parent)
-    name = sweep or parent_run.data.tags.get("sweep", parent_run.info.run_id)
-    runs = collect(client, parent_run.info.run_id)
-    if not runs:
-        raise SystemExit(f"wdss.report: the sweep {name!r} ({parent_run.info.run_id}) has no jobs")
+    if runs or experiment:
+        parent_run = None
+        selected = find_runs(client, runs, experiment, filter_string)
+        name = name or (experiment if experiment and not runs else "runs")
+    else:
+        parent_run = find_parent(client, sweep, parent)
+        name = name or sweep or parent_run.data.tags.get("sweep", parent_run.info.run_id)
+        selected = collect(client, parent_run.info.run_id)
+        if not selected:
+            raise SystemExit(f"wdss.report: the sweep {name!r} ({parent_run.info.run_id}) has no jobs")
+        check_one_dataset(parent_run, selected)
+    runs = selected
     groups = group(runs)
     rows = list(groups)
     metrics, notes = summarise(groups)
@@ -631,12 +702,15 @@ def report(
         + (f"Test metrics at {_scale_words(shown, scales)}: " if scales else "Inference cost: ")
         + "mean ± half-width of the 95% t-interval over n seeds (n/a with one seed); the best of each column in bold."
         + "\n\n"
-        + compact_table(rows, metrics, notes, columns, scales)
+        + compact_table(
+            rows, metrics, notes, columns, scales, {row: _tags(g[0]).get("data_root") for row, g in groups.items()}
+        )
         + orderings(name, groups, shown, scales)
         + (TEMPORAL_NOTE if any("twe_ratio" in key or "tpsnr" in key for key, *_ in columns) else "")
         + (noise_ceiling_note(runs) if scales else "")
         + f"\nMetrics on tone-mapped output: {metric_path(runs)}. {len(runs)} runs ({counts}); "
-        + f"parent run {parent_run.info.run_id}; every metric at every scale in table.csv.\n"
+        + (f"parent run {parent_run.info.run_id}; " if parent_run is not None else "")
+        + "every metric at every scale in table.csv.\n"
     )
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
@@ -646,9 +720,12 @@ def report(
     tradeoff_plot(rows, metrics, out / "tradeoff.png", shown)  # "avg" plots the means over scales
     qualitative_figure(client, groups, out / "qualitative.png", plot_scale)
     frames_plot(client, groups, out / "frames.png", plot_scale)
-    client.log_artifacts(parent_run.info.run_id, str(out), "report")
     print(markdown)
-    print(f"wdss.report: wrote {out} (also logged on run {parent_run.info.run_id})")
+    if parent_run is not None:
+        client.log_artifacts(parent_run.info.run_id, str(out), "report")
+        print(f"wdss.report: wrote {out} (also logged on run {parent_run.info.run_id})")
+    else:
+        print(f"wdss.report: wrote {out}")
     return out
 
 
@@ -659,7 +736,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     which = parser.add_mutually_exclusive_group(required=True)
     which.add_argument("--sweep", help="the sweep's name (its newest parent run)")
-    which.add_argument("--parent", help="the parent run id")
+    which.add_argument("--parent", help="the parent run id (its children: a sweep's jobs, or a training's evaluations)")
+    which.add_argument("--runs", nargs="+", metavar="ID", help="any runs by id: a row per configuration and data")
+    which.add_argument("--experiment", help="the runs of this experiment that have test or bench metrics")
+    parser.add_argument(
+        "--filter", default="", help="with --experiment: an MLflow filter, e.g. \"tags.data = 'bench'\""
+    )
+    parser.add_argument("--name", default=None, help="the report's folder under --out (default: the sweep's name)")
     parser.add_argument("--tracking-uri", default=None, help="default: $MLFLOW_TRACKING_URI or sqlite:///mlflow.db")
     parser.add_argument("--out", default="outputs/reports")
     parser.add_argument(
@@ -669,7 +752,19 @@ def main(argv: Sequence[str] | None = None) -> None:
         "paper table's: 2x for the ablations, 3x for methods, avg for scales)",
     )
     args = parser.parse_args(argv)
-    report(args.sweep, args.parent, tracking_uri=args.tracking_uri, out_dir=args.out, scale=args.scale)
+    if args.filter and not args.experiment:
+        parser.error("--filter selects among the runs of --experiment")
+    report(
+        args.sweep,
+        args.parent,
+        runs=args.runs or (),
+        experiment=args.experiment,
+        filter_string=args.filter,
+        name=args.name,
+        tracking_uri=args.tracking_uri,
+        out_dir=args.out,
+        scale=args.scale,
+    )
 
 
 if __name__ == "__main__":

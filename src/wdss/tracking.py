@@ -29,6 +29,7 @@ __all__ = [
     "git_commit",
     "prepare_store",
     "reap_dead_runs",
+    "data_tags",
     "run_name",
     "run_tags",
 ]
@@ -104,9 +105,33 @@ def run_tags(cfg: DictConfig) -> dict[str, str]:
         for key in ("transform", "basis", "head", "temporal", "scale"):
             tags[key] = "n/a (baseline)"
     tags["seed"] = str(cfg.get("seed"))
+    tags.update(data_tags(cfg))
     tags["git_commit"] = git_commit(OmegaConf.select(cfg, "paths.root_dir", default="."))
     tags["host"], tags["pid"] = socket.gethostname(), str(os.getpid())  # lets reap_dead_runs find killed runs
     tags.update({str(k): str(v) for k, v in (cfg.get("tags") or {}).items()})
+    return tags
+
+
+def _shown_path(path: Any, cfg: DictConfig) -> str:
+    """A data folder as a tag shows it: relative to the project when it lies inside, else as given."""
+    folder = Path(str(path))
+    root = Path(str(OmegaConf.select(cfg, "paths.root_dir", default=".")))
+    try:
+        return str(folder.resolve().relative_to(root.resolve()))
+    except ValueError:
+        return str(folder)
+
+
+def data_tags(cfg: DictConfig) -> dict[str, str]:
+    """``data_root`` (the folder the test split is read from: ``data.test_root`` when set), and ``train_data_root``
+    where training read another: the report puts runs of different data in rows of their own."""
+    root = OmegaConf.select(cfg, "data.root", default=None)
+    if root is None:
+        return {}
+    test_root = OmegaConf.select(cfg, "data.test_root", default=None)
+    tags = {"data_root": _shown_path(test_root or root, cfg)}
+    if test_root is not None:
+        tags["train_data_root"] = _shown_path(root, cfg)
     return tags
 
 

@@ -188,7 +188,8 @@ def train(cfg: DictConfig) -> dict[str, float]:
             "on these frames (fit=true); numbers from random weights are never reported"
         )
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
-    datamodule.check()  # a missing data root or sequence: refused before any run starts
+    # A missing data root or sequence of the splits this run reads: refused before any run starts.
+    datamodule.check(["train", "val"] * bool(fitting) + ["test"] * bool(cfg.get("test")))
     name = run_name(cfg)
     multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
     callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [progress_bar(multirun=multirun)]
