@@ -68,6 +68,7 @@ ui: setup ## the MLflow UI on http://127.0.0.1:5000 (runs of $MLFLOW_TRACKING_UR
 ifneq ($(filter http://% https://%,$(TRACKING_URI)),)
 	@echo "MLFLOW_TRACKING_URI is a tracking server, which serves its own UI: open $(TRACKING_URI)"
 else
+	@$(PY) -c "from wdss.tracking import runs_view_url; print('wdss: the training runs:', runs_view_url('$(TRACKING_URI)'))"
 	$(VENV)/bin/mlflow ui --backend-store-uri '$(TRACKING_URI)' --host 127.0.0.1 --port 5000
 endif
 

@@ -32,6 +32,8 @@ __all__ = [
     "data_tags",
     "run_name",
     "run_tags",
+    "runs_view_url",
+    "ui_links",
 ]
 
 PARENT_FILE = "mlflow_parent_run_id"  # in the sweep directory
@@ -133,6 +135,34 @@ def data_tags(cfg: DictConfig) -> dict[str, str]:
     if test_root is not None:
         tags["train_data_root"] = _shown_path(root, cfg)
     return tags
+
+
+UI_ADDRESS = "http://127.0.0.1:5000"  # where `make ui` serves a local store
+
+
+def ui_links(tracking_uri: str, experiment_id: str, run_id: str | None = None) -> str:
+    """Where the MLflow UI shows the experiment's training runs (MLflow 3 opens an experiment on its GenAI
+    overview; ``workflowType=machine_learning`` is its runs table), and the run itself when given. A tracking
+    server serves its own UI; a local store is served by ``make ui``."""
+    served = tracking_uri.startswith(("http://", "https://"))
+    base = tracking_uri.rstrip("/") if served else UI_ADDRESS
+    runs = f"{base}/#/experiments/{experiment_id}/runs?workflowType=machine_learning"
+    lines = [f"MLflow runs: {runs}" + ("" if served else " (make ui)")]
+    if run_id:
+        lines.append(f"MLflow run:  {base}/#/experiments/{experiment_id}/runs/{run_id}")
+    return "\n".join(lines)
+
+
+def runs_view_url(tracking_uri: str, experiment_name: str = "wdss") -> str:
+    """The runs table of ``experiment_name`` in the UI (``make ui`` prints it); the experiments list when the store
+    has no such experiment yet."""
+    from mlflow import MlflowClient
+
+    base = tracking_uri.rstrip("/") if tracking_uri.startswith(("http://", "https://")) else UI_ADDRESS
+    experiment = MlflowClient(tracking_uri).get_experiment_by_name(experiment_name)
+    if experiment is None:
+        return f"{base}/#/experiments"
+    return f"{base}/#/experiments/{experiment.experiment_id}/runs?workflowType=machine_learning"
 
 
 def prepare_store(tracking_uri: str) -> None:

@@ -563,3 +563,32 @@ def test_a_split_naming_a_missing_sequence_is_refused_with_the_syntax(root):
         SceneDataModule(root, {"test": ["seq_b"]}, ["target"], patch_size=None, test_root=root / "elsewhere").check(
             ["test"]
         )
+
+
+def test_a_folder_of_other_wdss_renders_is_never_resumed_as_the_preset(tmp_path, monkeypatch):
+    """data.root=<held-out scenes rendered by wdss> with the preset's train split: nothing is rendered into it."""
+    from wdss.render import RenderOnFirstUse, sequence
+
+    rendered = []
+    monkeypatch.setattr(sequence, "render_preset", lambda root, name: rendered.append(root))
+    other = tmp_path / "heldout"
+    write_sequence(other / "heldout_400", frames=(0, 1, 2), size=(8, 8), scales=())
+    meta = {
+        "settings": {"frames": 2, "passes": ["emission"]},
+        "sampling": {},
+        "render_seconds": {"0": 1, "1": 1, "2": 1},
+    }
+    (other / "heldout_400" / "sequence.json").write_text(json.dumps(meta))
+    prepare = RenderOnFirstUse("mini", home=tmp_path / "mini")
+    dm = SceneDataModule(other, {"train": ["train_000"], "test": ["heldout_400"]}, ["target"], prepare=prepare)
+    dm.prepare_data()
+    dm.check(["test"])
+    with pytest.raises(SceneError, match="data.splits.train: 'train_000' not under"):
+        dm.check()
+    assert rendered == [] and sorted(p.name for p in other.iterdir()) == ["heldout_400"]
+    # Its own folder, stopped part-way, resumes.
+    own = tmp_path / "mini"
+    write_sequence(own / "train_000", frames=(0, 1), size=(8, 8), scales=())
+    (own / "train_000" / "sequence.json").write_text(json.dumps({**meta, "render_seconds": {"0": 1}}))
+    SceneDataModule(own, {"train": ["train_000"]}, ["target"], prepare=prepare).prepare_data()
+    assert rendered == [own]

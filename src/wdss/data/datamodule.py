@@ -216,7 +216,12 @@ class SceneDataModule(L.LightningDataModule):
             if why:
                 raise SceneError(why)
             return  # rendered on first use
-        resumable = self.prepare is not None and any(self.root.glob("*/sequence.json"))
+        resumes = getattr(self.prepare, "resumes", None)
+        resumable = (
+            self.prepare is not None
+            and (resumes is None or resumes(self.root))
+            and any(self.root.glob("*/sequence.json"))
+        )
         for split, (names, _) in self.splits.items():
             if split not in splits:
                 continue
@@ -267,7 +272,8 @@ class SceneDataModule(L.LightningDataModule):
             or len(rendered[name].get("render_seconds") or {})
             < int((rendered[name].get("settings") or {}).get("frames", -1)) + 1
         )
-        if rendered and unfinished:
+        resumes = getattr(self.prepare, "resumes", None)
+        if rendered and unfinished and (resumes is None or resumes(self.root)):
             print(f"wdss: {self.root}: resuming the render of {', '.join(unfinished)}", flush=True)
             self.prepare(self.root)
 

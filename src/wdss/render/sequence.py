@@ -483,6 +483,11 @@ class RenderOnFirstUse:
             f"{self.home}; to render it into {root}: data.prepare.anywhere=true)"
         )
 
+    def resumes(self, root: str | Path) -> bool:
+        """Whether a render stopped part-way in the existing folder ``root`` is this preset's to resume: only in
+        its own folder (or anywhere, when asked), never in a folder of other frames that lacks a split's sequence."""
+        return self.anywhere or (self.home is not None and Path(root).resolve() == self.home.resolve())
+
     def __call__(self, root: str | Path) -> list[Path]:
         why = self.refusal(root)
         if why:
