@@ -38,6 +38,7 @@ def test_training_renders_its_dataset_on_first_use_then_trains_and_tests(tmp_pat
     # Training reports plain lines too, and the metrics once, in full: not Lightning's table cut to 80 columns.
     assert "epoch 1/" in done.stdout and "\r" not in done.stdout
     assert "  test/psnr_2x = " in done.stdout and "Test metric" not in done.stdout
+    assert "  MLflow runs: http://127.0.0.1:5000/#/experiments/" in done.stdout  # the UI's runs table, not GenAI
     from mlflow import MlflowClient
 
     client = MlflowClient(uri)

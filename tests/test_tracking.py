@@ -65,3 +65,21 @@ def test_make_ui_opens_the_store_training_logs_to(uri):
     done = subprocess.run(["make", "-n", "ui"], cwd=PROJECT_ROOT, env=env, capture_output=True, text=True, check=True)
     [command] = [line for line in done.stdout.splitlines() if "mlflow ui" in line]
     assert f"--backend-store-uri '{uri or 'sqlite:///mlflow.db'}' --host 127.0.0.1" in command
+
+
+def test_run_links_open_the_runs_table_and_the_run(tmp_path):
+    from mlflow import MlflowClient
+
+    from wdss.tracking import run_links, runs_view_url
+
+    uri = f"sqlite:///{tmp_path}/mlflow.db"
+    client = MlflowClient(uri)
+    experiment = client.create_experiment("wdss", artifact_location=(tmp_path / "a").as_uri())
+    run = client.create_run(experiment).info.run_id
+    runs = f"http://127.0.0.1:5000/#/experiments/{experiment}/runs"
+    assert run_links(uri, run).splitlines() == [
+        f"MLflow runs: {runs}?workflowType=machine_learning (make ui)",
+        f"MLflow run:  {runs}/{run}",
+    ]
+    assert runs_view_url(uri) == f"{runs}?workflowType=machine_learning"
+    assert runs_view_url(uri, "other") == "http://127.0.0.1:5000/#/experiments"

@@ -10,6 +10,7 @@ and optionally writes every prediction as linear EXR and tone-mapped PNG, and ev
 from __future__ import annotations
 
 import sys
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -20,11 +21,12 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.exr import write_exr
 from wdss.errors import entry_point
+from wdss.logfile import log_files_to_mlflow
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
-from wdss.progress_bar import progress_bar
+from wdss.progress_bar import progress_callbacks
 from wdss.targets import check_targets, instantiate
-from wdss.tracking import GROUPS, RUN_ID_FILE, data_tags, ensure_experiment, prepare_store
+from wdss.tracking import GROUPS, RUN_ID_FILE, data_tags, ensure_experiment, prepare_store, run_links
 
 __all__ = ["WritePredictions", "evaluate", "main"]
 
@@ -134,7 +136,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
     datamodule.check(["test"])  # a missing data root or sequence: refused before any run starts
     logger = _eval_logger(cfg, ckpt)
-    callbacks = [progress_bar()]
+    callbacks = progress_callbacks()
     if cfg.get("write_outputs"):
         callbacks.append(WritePredictions(Path(str(cfg.paths.output_dir)) / "frames"))
     if cfg.get("video"):
@@ -153,8 +155,10 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
         logger.finalize("FAILED")  # the evaluation's own run; the training run is never touched
         raise
     print(f"wdss.eval: {ckpt} -> MLflow run {logger.run_id}")
+    print(textwrap.indent(run_links(str(cfg.logger.tracking_uri), logger.run_id), "  "))
     for key in sorted(metrics):
         print(f"  {key} = {metrics[key]:.4g}")
+    log_files_to_mlflow(logger.experiment, logger.run_id, "wdss.eval")  # eval.log, with the metrics
     return metrics
 
 

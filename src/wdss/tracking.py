@@ -33,7 +33,7 @@ __all__ = [
     "run_name",
     "run_tags",
     "runs_view_url",
-    "ui_links",
+    "run_links",
 ]
 
 PARENT_FILE = "mlflow_parent_run_id"  # in the sweep directory
@@ -140,17 +140,24 @@ def data_tags(cfg: DictConfig) -> dict[str, str]:
 UI_ADDRESS = "http://127.0.0.1:5000"  # where `make ui` serves a local store
 
 
-def ui_links(tracking_uri: str, experiment_id: str, run_id: str | None = None) -> str:
-    """Where the MLflow UI shows the experiment's training runs (MLflow 3 opens an experiment on its GenAI
-    overview; ``workflowType=machine_learning`` is its runs table), and the run itself when given. A tracking
-    server serves its own UI; a local store is served by ``make ui``."""
-    served = tracking_uri.startswith(("http://", "https://"))
-    base = tracking_uri.rstrip("/") if served else UI_ADDRESS
-    runs = f"{base}/#/experiments/{experiment_id}/runs?workflowType=machine_learning"
-    lines = [f"MLflow runs: {runs}" + ("" if served else " (make ui)")]
-    if run_id:
-        lines.append(f"MLflow run:  {base}/#/experiments/{experiment_id}/runs/{run_id}")
-    return "\n".join(lines)
+def _ui_base(tracking_uri: str) -> tuple[str, str]:
+    """The UI's address (a tracking server serves its own; a local store is served by ``make ui``) and a hint."""
+    if tracking_uri.startswith(("http://", "https://")):
+        return tracking_uri.rstrip("/"), ""
+    return UI_ADDRESS, " (make ui)"
+
+
+def run_links(tracking_uri: str, run_id: str) -> str:
+    """Two lines: where the MLflow UI shows the run's experiment as a table of training runs (MLflow 3 opens an
+    experiment on its GenAI overview; ``workflowType=machine_learning`` is the runs table), and the run itself."""
+    from mlflow import MlflowClient
+
+    experiment_id = MlflowClient(tracking_uri).get_run(run_id).info.experiment_id
+    base, hint = _ui_base(tracking_uri)
+    return (
+        f"MLflow runs: {base}/#/experiments/{experiment_id}/runs?workflowType=machine_learning{hint}\n"
+        f"MLflow run:  {base}/#/experiments/{experiment_id}/runs/{run_id}"
+    )
 
 
 def runs_view_url(tracking_uri: str, experiment_name: str = "wdss") -> str:
@@ -158,7 +165,7 @@ def runs_view_url(tracking_uri: str, experiment_name: str = "wdss") -> str:
     has no such experiment yet."""
     from mlflow import MlflowClient
 
-    base = tracking_uri.rstrip("/") if tracking_uri.startswith(("http://", "https://")) else UI_ADDRESS
+    base, _ = _ui_base(tracking_uri)
     experiment = MlflowClient(tracking_uri).get_experiment_by_name(experiment_name)
     if experiment is None:
         return f"{base}/#/experiments"
@@ -268,7 +275,9 @@ class SweepParentRun(Callback):
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         parent = Path(config.hydra.sweep.dir) / PARENT_FILE
         if parent.exists():
-            self._close(_tracking_uri(config), parent.read_text().strip())
+            uri, run_id = _tracking_uri(config), parent.read_text().strip()
+            self._close(uri, run_id)
+            print(f"wdss: sweep done (parent run {run_id})\n" + run_links(uri, run_id), flush=True)
 
     @staticmethod
     def _close(uri: str, run_id: str) -> None:

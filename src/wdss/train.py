@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import textwrap
 import time
 from pathlib import Path
 from typing import Any
@@ -27,9 +28,18 @@ from wdss.checkpoint import CheckpointError, read_checkpoint
 from wdss.distributed import use_rank_command
 from wdss.errors import ConfigError, entry_point
 from wdss.paths import CONF_DIR
-from wdss.progress_bar import progress_bar
+from wdss.logfile import log_exception, log_files_to_mlflow
+from wdss.progress_bar import progress_callbacks
 from wdss.targets import TargetRefused, check_targets, instantiate
-from wdss.tracking import RUN_ID_FILE, ensure_experiment, prepare_store, reap_dead_runs, run_name, run_tags
+from wdss.tracking import (
+    RUN_ID_FILE,
+    ensure_experiment,
+    prepare_store,
+    reap_dead_runs,
+    run_links,
+    run_name,
+    run_tags,
+)
 
 __all__ = ["ConfigError", "log_noise_ceilings", "main", "train", "validate"]
 
@@ -192,7 +202,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     datamodule.check(["train", "val"] * bool(fitting) + ["test"] * bool(cfg.get("test")))
     name = run_name(cfg)
     multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
-    callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + [progress_bar(multirun=multirun)]
+    callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + progress_callbacks(multirun=multirun)
     if cfg.get("video") and cfg.get("test"):
         from wdss.video import SequenceVideos
 
@@ -256,12 +266,27 @@ def train(cfg: DictConfig) -> dict[str, float]:
     except BaseException as error:
         stopped_by = _stopped_by(error)
         if stopped_by is None:
+            log_exception(error, "wdss.train")
+            log_files_to_mlflow(experiment, run_id, "wdss.train")
             logger.finalize("FAILED")
             raise
         logger.finalize("KILLED")
         print(f"wdss.train: stopped by {stopped_by.name}; resume with ckpt_path=last (checkpoints in {output_dir})")
+        log_files_to_mlflow(experiment, run_id, "wdss.train")
         raise SystemExit(128 + stopped_by) from error
     return metrics
+
+
+def _log_run_log(cfg: DictConfig) -> None:
+    """At the end of a training run: its log file, with the final metrics, an artifact of its MLflow run."""
+    from lightning.pytorch.utilities import rank_zero_only
+
+    uri = OmegaConf.select(cfg, "logger.tracking_uri")
+    recorded = Path(str(cfg.paths.output_dir)) / RUN_ID_FILE
+    if uri and recorded.is_file() and getattr(rank_zero_only, "rank", 0) == 0:
+        from mlflow import MlflowClient
+
+        log_files_to_mlflow(MlflowClient(str(uri)), recorded.read_text().strip(), "wdss.train")
 
 
 def log_noise_ceilings(module: Any, datamodule: Any, logger: Any) -> dict[str, float]:
@@ -339,10 +364,14 @@ def main(cfg: DictConfig) -> float | None:
     metrics = train(cfg)
     output_dir = cfg.paths.output_dir
     print(f"wdss.train: run {run_name(cfg)!r} done; outputs in {output_dir}")
-    print(f"  MLflow: {OmegaConf.select(cfg, 'logger.tracking_uri')} -- browse with `make ui`")
+    uri = str(OmegaConf.select(cfg, "logger.tracking_uri"))
+    run_id = Path(str(output_dir)) / RUN_ID_FILE
+    if run_id.is_file():
+        print(textwrap.indent(run_links(uri, run_id.read_text().strip()), "  "))
     shown = ("test/psnr", "test/ssim", "test/flip", "bench/")
     for key in sorted(k for k in metrics if k.startswith(shown) or k == "test/noise_ceiling"):
         print(f"  {key} = {metrics[key]:.4g}")
+    _log_run_log(cfg)
     return metrics.get("val/psnr")
 
 
