@@ -3,6 +3,8 @@ anything else keeps its traceback."""
 
 from __future__ import annotations
 
+import logging
+
 import pytest
 
 from wdss.checkpoint import CheckpointError
@@ -39,6 +41,29 @@ def test_a_bug_keeps_its_traceback_and_a_result_passes_through():
     assert main(False) == 1.5
     with pytest.raises(KeyError, match="a bug"):
         main(True)
+
+
+def test_what_an_entry_point_printed_and_how_it_ended_are_in_the_job_log_file(tmp_path, capsys):
+    @one_line_errors("wdss.thing")
+    def main(error: Exception) -> None:
+        print("epoch 1/2: 3 batches in 1s")
+        raise error
+
+    log = tmp_path / "thing.log"  # as Hydra's job logging: a file handler on the root logger
+    handler = logging.FileHandler(log)
+    logging.getLogger().addHandler(handler)
+    try:
+        with pytest.raises(SystemExit):
+            main(ConfigError("data.root: 'mnii' is not a dataset"))
+        with pytest.raises(KeyError):
+            main(KeyError("a bug"))
+    finally:
+        logging.getLogger().removeHandler(handler)
+        handler.close()
+    assert capsys.readouterr().err == "wdss.thing: data.root: 'mnii' is not a dataset\n"  # the console as before
+    text = log.read_text()
+    assert text.startswith("epoch 1/2: 3 batches in 1s\nwdss.thing: data.root: 'mnii' is not a dataset\nepoch 1/2")
+    assert "Traceback (most recent call last)" in text and text.endswith("KeyError: 'a bug'\n")
 
 
 @pytest.mark.parametrize(

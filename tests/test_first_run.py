@@ -38,12 +38,15 @@ def test_training_renders_its_dataset_on_first_use_then_trains_and_tests(tmp_pat
     # Training reports plain lines too, and the metrics once, in full: not Lightning's table cut to 80 columns.
     assert "epoch 1/" in done.stdout and "\r" not in done.stdout
     assert "  test/psnr_2x = " in done.stdout and "Test metric" not in done.stdout
+    # The run's folder (training runs only: outputs/runs) keeps what it printed in its log file, an MLflow artifact.
+    [log] = (tmp_path / "outputs" / "runs").glob("*/train.log")
+    assert "][wdss.train][INFO] - epoch 1/" in log.read_text() and "  test/psnr_2x = " in log.read_text()
     assert "  MLflow runs: http://127.0.0.1:5000/#/experiments/" in done.stdout  # the UI's runs table, not GenAI
     from mlflow import MlflowClient
 
     client = MlflowClient(uri)
     [run] = client.search_runs([client.get_experiment_by_name("wdss").experiment_id])
-    assert run.info.status == "FINISHED"
+    assert run.info.status == "FINISHED" and "train.log" in {a.path for a in client.list_artifacts(run.info.run_id)}
     assert {"test/psnr_2x", "test/psnr_4x", "val/psnr", "train/loss"} <= set(run.data.metrics)
 
 

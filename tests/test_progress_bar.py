@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import logging
 import re
+import sys
 
 import lightning as L
 import torch
 from lightning.pytorch.demos.boring_classes import BoringModel
 
-from wdss.progress_bar import LineProgressBar, progress_bar
+from wdss.logfile import teed_output
+from wdss.progress_bar import LineProgressBar, LogLines, progress_bar, progress_callbacks
 
 
 class LoggingModel(BoringModel):
@@ -21,7 +24,7 @@ class LoggingModel(BoringModel):
         self.log("val/psnr", torch.tensor(30.0 + self.current_epoch), prog_bar=True)
 
 
-def fit_and_test(bar: LineProgressBar) -> list[str]:
+def fit_and_test(bar: LineProgressBar | LogLines, **kwargs) -> L.Trainer:
     trainer = L.Trainer(
         max_epochs=2,
         limit_train_batches=3,
@@ -32,6 +35,7 @@ def fit_and_test(bar: LineProgressBar) -> list[str]:
         enable_checkpointing=False,
         enable_model_summary=False,
         num_sanity_val_steps=0,
+        **kwargs,
     )
     model = LoggingModel()
     trainer.fit(model)
@@ -68,3 +72,45 @@ def test_a_long_loop_gets_a_line_every_every_s_seconds(capsys):
 def test_off_a_terminal_or_in_a_sweep_the_bar_is_plain_lines():
     assert isinstance(progress_bar(), LineProgressBar)  # pytest captures stdout: not a terminal
     assert isinstance(progress_bar(multirun=True), LineProgressBar)
+    assert [type(c) for c in progress_callbacks()] == [LineProgressBar]
+
+
+def test_under_an_entry_point_what_is_printed_reaches_the_log_file_and_the_console_is_unchanged(tmp_path, capsys):
+    """A Hydra job's log file (a file handler on the root logger) gets the plain lines, the metrics and warnings, as
+    records of the command; beside a rich bar (a terminal) LogLines writes the same lines to the file only."""
+    log = tmp_path / "train.log"
+    handler = logging.FileHandler(log)
+    handler.setFormatter(logging.Formatter("[%(name)s][%(levelname)s] - %(message)s"))
+    logging.getLogger().addHandler(handler)
+    try:
+        with teed_output("wdss.train"):
+            fit_and_test(LineProgressBar())
+            print("  test/psnr_2x = 30.5")
+            sys.stdout.write("bar 1/3\rbar 2/3\r\x1b[2K\x1b[1mdone\x1b[0m\n")  # a bar redrawn in place
+            print("a warning", file=sys.stderr)
+        printed = capsys.readouterr()
+        assert printed.out.endswith("  test/psnr_2x = 30.5\nbar 1/3\rbar 2/3\r\x1b[2K\x1b[1mdone\x1b[0m\n")
+        lines = log.read_text().splitlines()
+        assert lines[-3:] == [
+            "[wdss.train][INFO] -   test/psnr_2x = 30.5",
+            "[wdss.train][INFO] - done",
+            "[wdss.train][WARNING] - a warning",
+        ]
+        epochs = [line for line in lines if line.startswith("[wdss.train][INFO] - epoch ")]
+        assert len(epochs) == 2 and epochs[1].endswith("val/psnr=31")
+        [test] = [line for line in printed.out.splitlines() if line.startswith("test: ")]
+        assert f"[wdss.train][INFO] - {test}" in lines  # as printed
+
+        log.write_text("")
+        with teed_output("wdss.train"):
+            fit_and_test(LogLines(), enable_progress_bar=False)
+        assert "epoch " not in capsys.readouterr().out
+        lines = [line for line in log.read_text().splitlines() if line.startswith("[wdss.train]")]
+        assert [line.split(":")[0] for line in lines] == [
+            "[wdss.train][INFO] - epoch 1/2",
+            "[wdss.train][INFO] - epoch 2/2",
+            "[wdss.train][INFO] - test",
+        ]
+    finally:
+        logging.getLogger().removeHandler(handler)
+        handler.close()

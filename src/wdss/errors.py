@@ -7,17 +7,23 @@ with the closest keys rather than Hydra's "use +key"); anything else is a bug an
 Hydra output folder is removed when the refusal left nothing in it but Hydra's own record, so that a mistyped
 command leaves no folder that looks like a run. In a Hydra sweep the error is raised as it is, so that Hydra reports
 which job failed.
+
+While an entry point runs, what it prints also goes to the job's Hydra log file (:mod:`wdss.logfile`), and so does
+how it ended: the one line of a refusal (but for a removed folder), or the traceback of a bug.
 """
 
 from __future__ import annotations
 
 import difflib
 import functools
+import logging
 import shutil
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
+
+from wdss.logfile import log_exception, teed_output, to_log_file
 
 __all__ = ["ConfigError", "UserError", "check_overrides", "entry_point", "one_line_errors"]
 
@@ -39,40 +45,53 @@ def _multirun() -> bool:
     return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
 
 
-def _remove_empty_output_dir() -> None:
+def _remove_empty_output_dir() -> bool:
     """Remove this job's Hydra output folder if it holds only ``.hydra/`` and empty log files (what Hydra writes
-    before the task runs): a refused command leaves no run folder behind."""
+    before the task runs): a refused command leaves no run folder behind. Whether it did."""
     from hydra.core.hydra_config import HydraConfig
+    from omegaconf import OmegaConf
 
     if not HydraConfig.initialized():
-        return
-    folder = Path(HydraConfig.get().runtime.output_dir)
-    if not folder.is_dir():
-        return
+        return False
+    output_dir = OmegaConf.select(HydraConfig.get(), "runtime.output_dir")  # None: a config composed, not run
+    if output_dir is None or not Path(output_dir).is_dir():
+        return False
+    folder = Path(output_dir)
     for entry in folder.iterdir():
         if entry.name == ".hydra" and entry.is_dir():
             continue
         if entry.suffix == ".log" and entry.is_file() and entry.stat().st_size == 0:
             continue
-        return  # the job wrote something: keep it
+        return False  # the job wrote something: keep it
     shutil.rmtree(folder, ignore_errors=True)
+    return True
 
 
 def one_line_errors(command: str) -> Callable[[F], F]:
     """Decorate an entry point (inside ``@hydra.main``): a :class:`UserError` becomes ``command: message`` on
-    stderr and exit status 2, instead of a traceback."""
+    stderr and exit status 2, instead of a traceback. What the entry point prints, and how it ended, also go to the
+    job's log file."""
 
     def wrap(main: F) -> F:
         @functools.wraps(main)
         def guarded(*args: Any, **kwargs: Any) -> Any:
             try:
-                return main(*args, **kwargs)
+                with teed_output(command):
+                    return main(*args, **kwargs)
             except UserError as err:
+                line = f"{command}: {err}"
                 if _multirun():
+                    to_log_file(line, logging.ERROR, command)
                     raise
-                print(f"{command}: {err}", file=sys.stderr, flush=True)
-                _remove_empty_output_dir()
+                print(line, file=sys.stderr, flush=True)
+                if not _remove_empty_output_dir():
+                    to_log_file(line, logging.ERROR, command)
                 raise SystemExit(2) from None
+            except SystemExit:
+                raise
+            except BaseException as err:
+                log_exception(err, command)
+                raise
 
         return guarded  # type: ignore[return-value]
 

@@ -2,7 +2,8 @@
 
 A tqdm bar written to a file is one endless line of carriage returns; :class:`LineProgressBar` prints a line per
 training epoch with its metrics and ETA, one after each test, and one every ``every_s`` seconds within a loop that
-takes longer.
+takes longer. Printed under an entry point, the lines reach the run's log file too (:mod:`wdss.logfile`); beside a
+terminal's rich bar, :class:`LogLines` writes the same lines to the log file only.
 """
 
 from __future__ import annotations
@@ -13,9 +14,10 @@ from typing import Any
 
 from lightning.pytorch.callbacks import Callback, ProgressBar
 
+from wdss.logfile import console, to_log_file
 from wdss.progress import duration
 
-__all__ = ["LineProgressBar", "progress_bar"]
+__all__ = ["LineProgressBar", "LogLines", "progress_bar", "progress_callbacks"]
 
 
 def progress_bar(*, multirun: bool = False) -> Callback:
@@ -24,12 +26,20 @@ def progress_bar(*, multirun: bool = False) -> Callback:
     if sys.stdout.isatty() and not multirun:
         from lightning.pytorch.callbacks import RichProgressBar
 
-        return RichProgressBar()
+        # Straight to the terminal: redrawn in place, its rows are no lines for the log file (wdss.logfile)
+        return RichProgressBar(console_kwargs={"file": console(sys.stdout)})
     return LineProgressBar()
 
 
-class LineProgressBar(ProgressBar):
-    """A progress bar of plain flushed lines, for logs and pipes.
+def progress_callbacks(*, multirun: bool = False) -> list[Callback]:
+    """:func:`progress_bar`, and beside a rich bar :class:`LogLines`: the run's log file gets the plain lines."""
+    bar = progress_bar(multirun=multirun)
+    return [bar] if isinstance(bar, LineProgressBar) else [bar, LogLines()]
+
+
+class LogLines(Callback):
+    """The plain progress lines of :class:`LineProgressBar`, written to the run's log file only (beside a terminal's
+    rich bar, which draws them on screen).
 
     ``epoch 3/16: 30 batches in 11s, ETA 2m26s, train/loss=0.0715 val/psnr=32.3`` after every training epoch
     (validation included), ``validate: ...`` / ``test: ...`` after those loops, and ``epoch 3/16: batch 120/400 ...``
@@ -43,18 +53,15 @@ class LineProgressBar(ProgressBar):
         self._start = self._last = time.monotonic()
         self._train_batches = self._val_batches = self._test_batches = 0
 
-    def disable(self) -> None:
-        self._enabled = False
-
-    def enable(self) -> None:
-        self._enabled = True
+    def setup(self, trainer: Any, pl_module: Any, stage: str) -> None:
+        self._enabled = trainer.is_global_zero  # as Lightning's bars: rank 0 reports
 
     def _print(self, text: str) -> None:
         if self._enabled:
-            print(text, flush=True)
+            to_log_file(text)
 
     def _metrics(self, trainer: Any, pl_module: Any) -> str:
-        items = self.get_metrics(trainer, pl_module).items()
+        items = trainer.progress_bar_metrics.items()
         return " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in items if k != "v_num")
 
     def _epoch(self, trainer: Any) -> str:
@@ -79,7 +86,7 @@ class LineProgressBar(ProgressBar):
 
     def on_train_batch_end(self, trainer: Any, pl_module: Any, *args: Any, **kwargs: Any) -> None:
         self._train_batches += 1
-        self._tick(self._epoch(trainer), self._train_batches, self.total_train_batches, trainer, pl_module)
+        self._tick(self._epoch(trainer), self._train_batches, trainer.num_training_batches, trainer, pl_module)
 
     def on_train_epoch_end(self, trainer: Any, pl_module: Any) -> None:
         elapsed = time.monotonic() - self._start
@@ -99,7 +106,8 @@ class LineProgressBar(ProgressBar):
         self._val_batches += 1
         label = "validate" if trainer.state.fn == "validate" else f"{self._epoch(trainer)} validation"
         if not trainer.sanity_checking:
-            self._tick(label, self._val_batches, self.total_val_batches, trainer, pl_module)
+            total = trainer.num_val_batches
+            self._tick(label, self._val_batches, sum(total) if isinstance(total, list) else total, trainer, pl_module)
 
     def on_validation_end(self, trainer: Any, pl_module: Any) -> None:
         if trainer.state.fn == "validate":
@@ -116,3 +124,20 @@ class LineProgressBar(ProgressBar):
 
     def on_test_end(self, trainer: Any, pl_module: Any) -> None:
         self._print(f"test: {self._test_batches} batches in {duration(time.monotonic() - self._start)}")
+
+
+class LineProgressBar(LogLines, ProgressBar):
+    """A progress bar of plain flushed lines (:class:`LogLines`), printed: for logs and pipes."""
+
+    def setup(self, trainer: Any, pl_module: Any, stage: str) -> None:
+        ProgressBar.setup(self, trainer, pl_module, stage)  # disables it on ranks but 0
+
+    def disable(self) -> None:
+        self._enabled = False
+
+    def enable(self) -> None:
+        self._enabled = True
+
+    def _print(self, text: str) -> None:
+        if self._enabled:
+            print(text, flush=True)

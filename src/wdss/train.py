@@ -27,8 +27,8 @@ from omegaconf import DictConfig, OmegaConf
 from wdss.checkpoint import CheckpointError, read_checkpoint
 from wdss.distributed import use_rank_command
 from wdss.errors import ConfigError, entry_point
-from wdss.paths import CONF_DIR
 from wdss.logfile import log_exception, log_files_to_mlflow
+from wdss.paths import CONF_DIR
 from wdss.progress_bar import progress_callbacks
 from wdss.targets import TargetRefused, check_targets, instantiate
 from wdss.tracking import (
