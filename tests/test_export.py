@@ -9,10 +9,11 @@ import onnx
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from onnx import numpy_helper
 
 from tests.model.helpers import fixture_batches, tiny_checkpoint
 from tests.test_train import run_module
-from wdss.export import ExportError, export, relative_error, run_onnx
+from wdss.export import MOTION_VECTORS, ExportError, export, relative_error, run_onnx
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
 
@@ -58,6 +59,19 @@ def check_parity(path, module: SuperResolutionModule, batches: list[dict], toler
     return error
 
 
+def initializers(path) -> list[np.ndarray]:
+    return [numpy_helper.to_array(i) for i in onnx.load(path).graph.initializer]
+
+
+def check_constants(path, module: SuperResolutionModule, height: int, width: int) -> None:
+    """No float64 constant (engines do not run float64) and none larger than the frame's longer side but the
+    weights: grids are stored per axis and expanded in the graph, never per pixel."""
+    arrays = initializers(path)
+    assert not [a.shape for a in arrays if a.dtype == np.float64]
+    largest = max(max(p.numel() for p in module.parameters()), height, width)
+    assert max(a.size for a in arrays) <= largest
+
+
 def perturb_kernel(ckpt) -> None:
     """The learned kernel's last layer starts at zero (joint bilateral exactly): give it values, so that parity also
     covers its logit corrections and BRDF exponents."""
@@ -98,9 +112,42 @@ def test_onnx_graph_matches_torch_on_a_fixture_frame(name, tmp_path):
     # No frame-sized constant (an exporter folds in-place padding into one): weights are the largest tensors.
     largest = max(p.numel() for p in module.parameters())
     assert max(int(np.prod(i.dims)) for i in graph.graph.initializer) <= largest
+    check_constants(path, module, 48, 96)
+    # What an engine needs frame after frame, beside the channels.
+    prep = layout["preprocessing"]
+    assert prep["depth"].startswith("planar camera depth (scene units); depth > 100") and "max(hi, 1)" in prep["depth"]
+    assert prep["spatial_mask"].startswith("1 where |depth - up(depth_lr)| > 0.01 or n . normalize(up(n_lr)) < 0.9")
+    assert "LR frame's own" in prep["lr_brdf"]
+    assert "median Rec. 709 luminance of lit pixels to 0.18" in layout["exposure"]
+    assert layout["motion_vectors"] == MOTION_VECTORS and MOTION_VECTORS["units"] == "HR pixels"
+    temporal = layout["temporal"]
+    assert temporal["trained_with"] == ("recurrent" if name == "dfasr" else "gt_history")
+    assert temporal["first_frame"]["history"].startswith("lr upsampled bilinearly")
+    if name != "dfasr":
+        assert temporal["training_history"].startswith("the ground-truth history")
     if name == "swt_rir":  # the RIR blocks run folded: one 3x3 convolution each, no expansion or reduction
         assert any(".fused.weight" in n for n in names) and not any(".expand." in n for n in names)
         assert layout["rir_folded"]
+
+
+def test_a_fixed_size_graph_computes_its_per_pixel_grids_at_384x216(tmp_path):
+    """Issue 41: a fixed 384x216 graph stored the joint-bilateral kernels' tent weights per pixel, in float64 (39 MB
+    for 0.18 M parameters; the constant folder's size limit spared 1080p's)."""
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", *CONFIGS["learned_bilateral_tap_brdf"])
+    perturb_kernel(ckpt)
+    path = export(compose_export(tmp_path, f"ckpt_path={ckpt}", "height=216", "width=384", "scale=2"))  # verified
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
+    check_constants(path, module, 216, 384)
+    assert path.stat().st_size < 10e6, path.stat().st_size
+
+
+@pytest.mark.slow
+def test_a_fixed_size_graph_at_1080p_stores_no_float64_and_stays_small(tmp_path):
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", *CONFIGS["learned_bilateral_tap_brdf"])
+    path = export(compose_export(tmp_path, f"ckpt_path={ckpt}", "height=1080", "width=1920", "scale=2"))
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
+    check_constants(path, module, 1080, 1920)
+    assert path.stat().st_size < 10e6, path.stat().st_size
 
 
 def test_dynamic_export_takes_other_even_sizes_and_the_training_preprocessing(tmp_path):
@@ -112,10 +159,12 @@ def test_dynamic_export_takes_other_even_sizes_and_the_training_preprocessing(tm
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True).eval()
     for scale in (2.0, 4.0):  # LR 24x48 (a native folder) and 12x24 (point-sampled), HR 48x96: not the traced size
         check_parity(path, module, fixture_batches(module.inputs, scale)[:1])
+    check_constants(path, module, 32, 64)
     layout = json.loads(path.with_suffix(".json").read_text())
     assert layout["size"]["dynamic"] and layout["inputs"][0]["shape"] == [1, 3, "2*half_lr_height", "2*half_lr_width"]
     assert layout["preprocessing"]["color_max"] == 10.0 and layout["preprocessing"]["depth_far"] == 50.0
     assert layout["preprocessing"]["brdf_knee"] == 0.0  # a run from before the knee: the hard switch it trained with
+    assert layout["preprocessing"]["depth"].startswith("planar camera depth (scene units); depth > 50")
 
 
 def test_fp16_export_stays_close_to_float32_torch(tmp_path):

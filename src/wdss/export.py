@@ -7,8 +7,10 @@ factor, so that the graph maps the inputs an engine can compute to the HR colour
 keys (:mod:`wdss.data.datamodule`), ``scale`` among them; outputs are ``color`` (linear HDR) and ``irradiance``
 (the demodulated prediction, which a recurrent model feeds back). Beside it, ``<name>.json`` describes the input
 layout an engine must feed: channels and their order, resolution, demodulation, what the graph applies itself
-(log1p), the radiance's exposure and, for a recurrent model, how to make its history. onnxruntime then checks the
-graph against torch on the example inputs.
+(log1p), the radiance's exposure, the motion vectors' convention and, for a temporal model, how to make its history
+frame after frame (the first frame's included) and what it was trained on. onnxruntime then checks the graph
+against torch on the example inputs. The graph stores no float64 constant and none larger than the frame's longer
+side: per-pixel ones are computed in it (:func:`fold_constants`).
 """
 
 from __future__ import annotations
@@ -29,13 +31,14 @@ from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.dataset import GBUFFER_STACK, Preprocessing
 from wdss.data.preprocess import LR_GUIDE
 from wdss.data.sampling import lr_size, point_sample
+from wdss.data.tonemap import MIDDLE_GREY
 from wdss.errors import UserError, entry_point
 from wdss.model.blocks import RIRBlock, fold_rir_blocks
 from wdss.model.module import SuperResolutionModule
 from wdss.model.profile import dummy_inputs
 from wdss.paths import CONF_DIR
 
-__all__ = ["ExportError", "InferenceGraph", "export", "export_onnx", "input_layout", "main"]
+__all__ = ["ExportError", "InferenceGraph", "export", "export_onnx", "fold_constants", "input_layout", "main"]
 
 MIN_OPSET = 17
 OUTPUTS = ("color", "irradiance")
@@ -57,10 +60,11 @@ CHANNELS: dict[str, tuple[str, list[str], str]] = {
     "lr": (
         "low",
         list(_RGB),
-        "(LR colour - LR emission) / the LR BRDF factor when demodulated (else the LR colour); see preprocessing",
+        "max(LR colour - LR emission, 0) / lr_brdf when demodulated (emission where separated), else the LR colour;"
+        " see preprocessing",
     ),
     "lr_color": ("low", list(_RGB), "LR colour"),
-    "lr_brdf": ("low", list(_RGB), "LR BRDF factor, as brdf's"),
+    "lr_brdf": ("low", list(_RGB), "the BRDF factor lr was divided by: see preprocessing.lr_brdf"),
     "lr_guide": (
         "low",
         [c for b in LR_GUIDE for c in _channels(b)],
@@ -72,12 +76,17 @@ CHANNELS: dict[str, tuple[str, list[str], str]] = {
         "HR BRDF factor (wdss.data.brdf.safe_brdf of F at preprocessing.brdf_knee): color = irradiance * brdf",
     ),
     "gbuffer": ("high", [c for b in GBUFFER_STACK for c in _channels(b)], "HR G-buffer stack"),
-    "spatial_mask": ("high", ["mask"], "1 where the HR G-buffer differs from the bilinearly upsampled LR one"),
+    "spatial_mask": (
+        "high",
+        ["mask"],
+        "1 where the HR G-buffer differs from the bilinearly upsampled LR one: see preprocessing.spatial_mask",
+    ),
     "history": ("high", list(_RGB), "previous irradiance, warped to this frame by the motion vectors"),
     "temporal_mask": (
         "high",
         ["depth_difference", "albedo_difference.r", "albedo_difference.g", "albedo_difference.b", "normal_term"],
-        "|depth - warped previous depth|, |albedo - warped previous albedo|, (1 - n . n_previous) / 2",
+        "|depth - warped previous depth|, |albedo - warped previous albedo|, (1 - n . n_previous) / 2: see "
+        "temporal.temporal_mask",
     ),
     "motion": ("high", ["motion.x", "motion.y"], "HR pixels, current minus previous position, y up"),
     "lr_gbuffer": ("low", ["depth", *_channels("normal")], "LR depth and normal"),
@@ -85,6 +94,67 @@ CHANNELS: dict[str, tuple[str, list[str], str]] = {
     "prev_lr_gbuffer": ("low", ["depth", *_channels("normal")], "the previous frame's LR depth and normal"),
     "history2": ("high", list(_RGB), "irradiance of frame t-2 warped to t through t-1"),
 }
+
+
+# Motion vectors as wdss's data holds them (wdss.data.warp, wdss.render.convert) and every history is warped with.
+MOTION_VECTORS = {
+    "units": "HR pixels",
+    "sign": "current minus previous screen position (x right, y up)",
+    "warp": (
+        "the pixel at column x, row y (rows down) of this frame was at column x - mv.x, row y + mv.y of the previous "
+        "frame: wdss.data.warp.warp_backward samples the previous frame there, bilinearly at pixel centres "
+        "(grid_sample, align_corners=False), zeros outside the frame"
+    ),
+}
+
+
+def _depth_rule(prep: Preprocessing) -> str:
+    """How a depth channel is preprocessed (wdss.data.preprocess.clean)."""
+    far = f"depth > {prep.depth_far:g} set to 0 (background), then " if prep.depth_far is not None else ""
+    if not prep.depth_normalize:
+        return f"planar camera depth as rendered ({far.removesuffix(', then ') or 'unchanged'})"
+    return (
+        f"planar camera depth (scene units); {far}d' = (d - lo) / (1e-6 + max(hi, 1) - lo), (lo, hi) the min "
+        "and max of the whole HR frame's depth after that step; an LR depth (lr_guide, lr_gbuffer) takes its HR "
+        "frame's (lo, hi), a previous frame's depth (temporal_mask) its own frame's"
+    )
+
+
+def _temporal(module: SuperResolutionModule, graph: InferenceGraph, prep: Preprocessing) -> dict[str, Any] | None:
+    """How a temporal graph is fed frame after frame, and what its history was in training."""
+    if "history" not in graph.inputs:
+        return None
+    trained = {
+        "gt_history": (
+            "the ground-truth history (temporal=gt_history): the reference HR frame t-1's irradiance, "
+            + ("max(colour - emission, 0) / its own brdf" if prep.demodulate else "its colour")
+            + ", warped; the model never saw its own output as history in training, which is all an engine has"
+        ),
+        "recurrent": (
+            "its own previous irradiance output, warped, over sequences of frames (temporal=recurrent), as an "
+            "engine runs it"
+        ),
+    }[module.temporal]
+    return {
+        "trained_with": module.temporal,
+        "training_history": trained,
+        "feed": (
+            "history = this graph's irradiance output of frame t-1, warped to frame t by frame t's motion vectors "
+            "(as wdss.upscale feeds any temporal model on frames without HR colour)"
+        ),
+        "first_frame": {
+            "history": "lr upsampled bilinearly to the HR size (align_corners=False), as wdss.upscale starts",
+            "temporal_mask": (
+                "against an all-zero previous G-buffer: |depth|, |albedo| and 0.5 (the previous frame of "
+                "wdss.upscale's first frame)"
+            ),
+        },
+        "temporal_mask": (
+            "the previous frame's depth, albedo and normal warped as its irradiance (bilinear, zeros outside, "
+            "normals renormalised: zero stays zero, a normal term of 0.5), compared with this frame's: "
+            "|depth - depth'|, |albedo - albedo'| per channel, (1 - n . n') / 2 (wdss.data.warp.temporal_mask)"
+        ),
+    }
 
 
 class ExportError(UserError, RuntimeError):
@@ -178,12 +248,34 @@ def export_onnx(
         opset_version=opset,
         dynamo=True,
         dynamic_shapes=_dynamic_shapes(graph) if dynamic else None,
+        optimize=False,  # below, with a size limit of its own
         verbose=False,
     )
+    fold_constants(program.model, max(height, width))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     program.save(str(path), external_data=False)
     return graph, inputs, reference
+
+
+def fold_constants(model: Any, longest_axis: int) -> None:
+    """Optimise an exported graph (``onnx_ir.Model``, in place) as ``torch.onnx.export(optimize=True)`` does
+    (onnxscript's constant folding and rewrites, then its fusions), folding no constant of more than
+    ``longest_axis`` elements (the traced frame's longer side).
+
+    In a fixed-size graph every tensor computed from the frame's size alone is a constant: the joint-bilateral
+    kernels' tent weights, offsets and masks (16 taps, twice for the learned kernel). onnxscript folds constants of
+    up to 512 x 512 elements by default, so a frame below that (384x216: 82944 pixels) stored each of them per
+    pixel (39 MB for 0.18 M parameters, in float64 while the taps' positions were) whereas 1080p's, above the
+    limit, stayed computed (3.4 MB). Folding only up to the longer side keeps the per-axis grids (``(1, W)`` and
+    ``(1, H)``) as constants and builds every per-pixel one in the graph from them, at any size (onnxruntime
+    folds them again in memory when it loads the graph). A product of weights larger than the longer side also
+    stays an operator, computed from its (smaller) factors."""
+    import onnxscript.optimizer
+    import onnxscript.rewriter.onnx_fusions
+
+    onnxscript.optimizer.optimize_ir(model, output_size_limit=int(longest_axis))
+    onnxscript.rewriter.onnx_fusions.fuse(model)
 
 
 def run_onnx(path: str | Path, inputs: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -236,8 +328,12 @@ def input_layout(
                 "description": description,
             }
         )
+    # The renderer's exposure rule, stated from its constants (imported here: wdss.render loads its whole package)
+    from wdss.render.exposure import MAX_DARKENING, SATURATED_SHARE, SATURATION
+
     net = graph.net
     recurrent = module.temporal == "recurrent"
+    thresholds = prep.spatial_thresholds
     return {
         "format": "onnx",
         "opset": opset,
@@ -282,15 +378,32 @@ def input_layout(
             ),
             "depth_far": prep.depth_far,  # depth beyond it is set to 0 (background)
             "depth_normalize": prep.depth_normalize,  # per frame (min, max) -> (0, 1); LR by its HR frame's range
+            "depth": _depth_rule(prep),
             "normals": "unit length, world space",
             "color_max": prep.color_max,  # colour clipped to [0, color_max] before anything else, when set
             "spatial_thresholds": dict(prep.spatial_thresholds),
+            "spatial_mask": (
+                f"1 where |depth - up(depth_lr)| > {thresholds['depth']:g} or n . normalize(up(n_lr)) < "
+                f"{thresholds['normal']:g} or the mean over r, g, b of |base_color - up(base_color_lr)| > "
+                f"{thresholds['albedo']:g}, else 0 (wdss.data.warp.spatial_mask): the HR G-buffer against the LR "
+                "frame's own (lr_guide's channels), up = bilinear upsampling to the HR size (pixel centres aligned, "
+                "align_corners=False, border values beyond), depths preprocessed as depth says"
+            ),
+            "lr_brdf": (
+                "the factor lr was divided by: brdf_factor of F computed as brdf says from the LR frame's own "
+                "buffers (a native LR render's G-buffer; in wdss's point-sampled data the HR buffers at the LR pixel "
+                "centres, nearest-exact, where it equals the HR brdf point-sampled), not the HR brdf resampled"
+            ),
         },
         # The graph applies log1p to lr and history itself: feed linear values.
         "log1p_inside": bool(getattr(net, "input_log", False)),
         "exposure": (
-            "colour is linear radiance pre-exposed as the training frames were (wdss renders: median luminance "
-            "~0.18): multiply the engine's pre-tonemap colour by its exposure before demodulating"
+            "colour (and emission) is linear radiance pre-exposed as the training frames were: wdss's renders "
+            "multiply every frame of a sequence, at every resolution, by one factor that brings the median Rec. 709 "
+            f"luminance of lit pixels to {MIDDLE_GREY:g} (lower where more than {SATURATED_SHARE:.0%} of the values "
+            f"would exceed {SATURATION:g}, never below {MAX_DARKENING:g} x that median; wdss.render.exposure). "
+            "Multiply the engine's pre-tonemap colour and emission by its exposure before demodulating; the outputs "
+            "are in that exposed space"
         ),
         "display": {"tonemap": module.hparams.tonemap_name, "exposure": module.hparams.tonemap_exposure},
         "history": (
@@ -298,10 +411,15 @@ def input_layout(
             "(wdss.data.warp.warp_backward: bilinear, zeros outside); on the first frame, lr upsampled bilinearly "
             "(align_corners=False)"
             if recurrent
-            else "the previous HR frame's irradiance, warped by the motion vectors"
+            else "the previous HR frame's irradiance, warped by the motion vectors: trained on the ground-truth "
+            "frame's, fed its own irradiance output by an engine; on the first frame, lr upsampled bilinearly "
+            "(align_corners=False); see temporal"
             if "history" in graph.inputs
             else None
         ),
+        # Frame after frame: what the history is, on the first frame too, and what it was in training.
+        "temporal": _temporal(module, graph, prep),
+        "motion_vectors": MOTION_VECTORS if {"history", "motion"} & set(graph.inputs) else None,
         "rir_folded": any(isinstance(m, RIRBlock) for m in net.modules()),
     }
 

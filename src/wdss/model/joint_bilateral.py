@@ -47,20 +47,37 @@ _MAX_EXPONENT = 30.0
 
 
 def _taps(
-    hr: int, lr: int, radius: int, device: torch.device, jitter: Tensor | None = None
+    hr: int, lr: int, radius: int, device: torch.device, dtype: torch.dtype, jitter: Tensor | None = None
 ) -> list[tuple[Tensor, Tensor, Tensor]]:
     """Per tap offset along one axis: the clamped LR index, the tent weight of every HR position, and the HR
-    position's offset from the tap's sample in LR pixels (``u - j - jitter``, before clamping), each ``(1, hr)``,
-    or ``(N, hr)`` for a per-sample ``jitter`` (N,): LR pixel ``j`` shaded at ``j + jitter`` (its centre at 0)."""
-    # float64 positions: floor() must not flip at exact cell boundaries for any size.
-    u = (torch.arange(hr, device=device, dtype=torch.float64) + 0.5) * (lr / hr) - 0.5
-    u = u[None] if jitter is None else u[None] - jitter.to(device, torch.float64)[:, None]
-    base = torch.floor(u)
+    position's offset from the tap's sample in LR pixels (``u - j - jitter``, before clamping), weight and offset in
+    ``dtype``, each ``(1, hr)``, or ``(N, hr)`` for a per-sample ``jitter`` (N,): LR pixel ``j`` shaded at
+    ``j + jitter`` (its centre at 0).
+
+    At the centres (no jitter, the only case an exported graph holds) the positions are exact integer arithmetic:
+    ``u = ((2x + 1) lr - hr) / (2 hr)``, its floor an integer division and its fraction one rounding, so that floor()
+    never flips at exact cell boundaries, with no float64 in an exported graph (which many engines lack)."""
+    compute = torch.promote_types(dtype, torch.float32)  # float16 and bfloat16 positions are rounded once, at the end
+    if jitter is None:
+        # (2x + 1) lr - hr >= -hr: shifted by one period (2 hr) to a non-negative numerator, so that integer
+        # division is the floor on every backend (truncation and floor agree there).
+        numerator = (2 * torch.arange(hr, device=device) + 1) * lr + hr
+        quotient = numerator // (2 * hr)
+        base = (quotient - 1)[None]
+        # u - floor(u), in [0, 1): the remainder from the quotient (the exporter cannot take % by a symbolic size)
+        fraction = ((numerator - quotient * (2 * hr)).to(compute) / (2 * hr))[None]
+    else:
+        # float64 positions: floor() must not flip at exact cell boundaries for any size (torch only: a graph
+        # takes no jitter).
+        u = (torch.arange(hr, device=device, dtype=torch.float64) + 0.5) * (lr / hr) - 0.5
+        u = u[None] - jitter.to(device, torch.float64)[:, None]
+        floor = torch.floor(u)
+        base, fraction = floor.long(), (u - floor).to(compute)
     taps = []
     for k in range(1 - radius, radius + 1):
-        j = base + k
-        weight = (1.0 - (u - j).abs() / radius).clamp_min(0.0)
-        taps.append((j.long().clamp(0, lr - 1), weight, u - j))
+        offset = fraction - k  # u - j for the tap j = floor(u) + k
+        weight = (1.0 - offset.abs() / radius).clamp_min(0.0)
+        taps.append(((base + k).clamp(0, lr - 1), weight.to(dtype), offset.to(dtype)))
     return taps
 
 
@@ -137,7 +154,8 @@ def neighbourhood(
     if centred(lr_jitter):
         lr_jitter = None  # every sample at its pixel centre: one set of taps for the batch
     x, y = (None, None) if lr_jitter is None else (lr_jitter[:, 0], lr_jitter[:, 1])
-    rows, cols = _taps(height, h, radius, lr.device, y), _taps(width, w, radius, lr.device, x)
+    rows = _taps(height, h, radius, lr.device, lr.dtype, y)
+    cols = _taps(width, w, radius, lr.device, lr.dtype, x)
     # Columns first, on the LR rows: the per-tap row gathers then copy whole contiguous rows, the cheap axis.
     for col_index, col_weight, col_offset in cols:
         source_cols = _gather(source, 3, col_index)
@@ -145,8 +163,8 @@ def neighbourhood(
             neighbour = _gather(source_cols, 2, row_index)
             yield Tap(
                 values=neighbour[:, :channels],
-                spatial=(row_weight[:, None, :, None] * col_weight[:, None, None, :]).to(lr.dtype),
-                offset=(row_offset.to(lr.dtype), col_offset.to(lr.dtype)),
+                spatial=row_weight[:, None, :, None] * col_weight[:, None, None, :],
+                offset=(row_offset, col_offset),
                 difference=guide - neighbour[:, channels:],
             )
 

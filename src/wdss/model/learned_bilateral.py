@@ -145,7 +145,7 @@ class LearnedBilateralUpsample(nn.Module):
             correction = out[:, :1].clamp(-_LOGIT_LIMIT, _LOGIT_LIMIT)
             # Taps outside the tent (weight 0) stay out: -inf would make a NaN gradient, a large negative does not.
             base = torch.log(range_weight(tap).clamp_min(1e-30))
-            logits.append(torch.where(tap.spatial > 0, base + correction, torch.full_like(base, -1e4)))
+            logits.append(torch.where(tap.spatial > 0, base + correction, -1e4))
             value = tap.values[:, :3]
             if self.tap_brdf:  # clamp, not a sigmoid: the kernel starts exactly at b = 0, and its gradient flows there
                 exponent = out[:, 1:2].clamp(0.0, 1.0)

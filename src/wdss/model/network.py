@@ -148,12 +148,15 @@ class TemporalExtractor(nn.Module):
         return x
 
 
-def _cell_centres(hr_pixels: int, device: torch.device) -> Tensor:
-    """The centres of the HR/2 cells (HR pixels ``2j, 2j + 1``) along one axis of a frame of ``hr_pixels``, the
-    frame spanning ``[-1, 1]``. With an odd count the last cell is the last pixel and its padding: its centre is
-    the frame's edge (a grid of ``ceil(n / 2)`` cells spans ``(n + 1) / n`` of the frame, not all of it)."""
-    half = hr_pixels / 2
-    return (2 * torch.arange(math.ceil(half), device=device, dtype=torch.float64) + 1) / half - 1
+def _cell_positions(hr_pixels: int, lr_pixels: int, lr_cell: int, device: torch.device) -> tuple[Tensor, int]:
+    """The centres of the HR/2 cells (HR pixels ``2j, 2j + 1``) along one axis of a frame of ``hr_pixels``, in LR
+    cells of ``lr_cell`` LR pixels from the frame's start (LR cell ``i`` spans ``[i, i + 1]``), as an exact
+    fraction: integer numerators (one per cell) over the returned denominator. Cell ``j``'s centre lies at
+    ``(2j + 1) / hr_pixels`` of the frame; with an odd count the last cell is the last pixel and its padding: its
+    centre is the frame's edge (a grid of ``ceil(n / 2)`` cells spans ``(n + 1) / n`` of the frame, not all of it).
+    Integers, so that floors never flip at exact cell boundaries and an exported graph holds no float64 (which many
+    engines lack)."""
+    return (2 * torch.arange(math.ceil(hr_pixels / 2), device=device) + 1) * lr_pixels, lr_cell * hr_pixels
 
 
 def cell_grid(
@@ -162,11 +165,12 @@ def cell_grid(
     """Along one axis of an HR frame of ``hr_pixels`` and its LR frame of ``lr_pixels`` (real pixel counts): the
     index of each HR/2 cell's nearest LR cell and the offset from that cell's centre (in half cells, LIIF's
     ``[-1, 1]``). An LR cell is ``lr_cell`` LR pixels: 2 on the LR/2 grid, 1 on DFASR's full LR grid."""
-    coord = _cell_centres(hr_pixels, device)
-    lr = lr_pixels / lr_cell  # LR cells across the frame (x.5 for an odd frame on the LR/2 grid)
-    index = ((coord + 1) / 2 * lr).floor().clamp(0, math.ceil(lr) - 1)
-    centre = (2 * index + 1) / lr - 1
-    return index.long(), ((coord - centre) * lr).to(dtype)
+    position, denominator = _cell_positions(hr_pixels, lr_pixels, lr_cell, device)
+    cells = math.ceil(lr_pixels / lr_cell)  # LR cells across the frame (the last one padded for an odd frame)
+    index = (position // denominator).clamp(0, cells - 1)  # position >= 0: integer division is the floor
+    # 2 (position - index) - 1 half cells from the centre: an exact integer numerator, rounded once
+    offset = (2 * (position - index * denominator) - denominator).to(torch.promote_types(dtype, torch.float32))
+    return index, (offset / denominator).to(dtype)
 
 
 def resample_to_cells(x: Tensor, hr_size: Sequence[int], lr_size: Sequence[int], lr_cell: int = 2) -> Tensor:
@@ -179,11 +183,14 @@ def resample_to_cells(x: Tensor, hr_size: Sequence[int], lr_size: Sequence[int],
         return F.interpolate(x, size=half, mode="bilinear", align_corners=False)
     for axis, hr_pixels, lr_pixels in ((-2, hr_size[0], lr_size[0]), (-1, hr_size[1], lr_size[1])):
         n = x.shape[axis]
-        # Each HR/2 centre in LR-cell index units (cell i centred at i), clamped: edge replication.
-        at = ((_cell_centres(hr_pixels, x.device) + 1) / 2 * (lr_pixels / lr_cell) - 0.5).clamp(0, n - 1)
-        low = at.floor().long()
+        position, denominator = _cell_positions(hr_pixels, lr_pixels, lr_cell, device=x.device)
+        # Each HR/2 centre in LR-cell index units (cell i centred at i), clamped: edge replication. Twice the
+        # numerator, less half a cell: (2 position - denominator) / (2 denominator), exact.
+        at = (2 * position - denominator).clamp(0, 2 * denominator * (n - 1))
+        low = at // (2 * denominator)
         high = (low + 1).clamp_max(n - 1)
-        t = (at - low).to(x.dtype).view([-1] + [1] * (-axis - 1))
+        t = (at - low * 2 * denominator).to(torch.promote_types(x.dtype, torch.float32)) / (2 * denominator)
+        t = t.to(x.dtype).view([-1] + [1] * (-axis - 1))
         x = x.index_select(axis, low) * (1 - t) + x.index_select(axis, high) * t
     return x
 
