@@ -95,3 +95,20 @@ def test_valid_overrides_and_hydra_flags_pass_to_hydra(capsys):
     check_overrides("wdss.render", CONF_DIR / "render", "default", ["-cn", "mini", "frames=3"])
     check_overrides("wdss.train", CONF_DIR, "train", ["data=nonexistent"])  # Hydra lists the group's options
     assert capsys.readouterr().err == ""
+
+
+def test_a_missing_checkpoint_names_the_checkpoints_beside_it(tmp_path):
+    from wdss.checkpoint import read_checkpoint
+
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    for name in ("epoch015.ckpt", "last.ckpt"):
+        (run / "checkpoints" / name).write_bytes(b"")
+    with pytest.raises(
+        CheckpointError, match=r"epoch16.ckpt is not a file; .*checkpoints holds epoch015.ckpt, last.ckpt$"
+    ):
+        read_checkpoint(run / "checkpoints" / "epoch16.ckpt")
+    with pytest.raises(CheckpointError, match=r"is not a file; .*checkpoints holds epoch015.ckpt, last.ckpt$"):
+        read_checkpoint(run)  # a run folder given for its checkpoint
+    with pytest.raises(CheckpointError, match=r"nowhere.ckpt is not a file$"):
+        read_checkpoint(tmp_path / "nowhere.ckpt")

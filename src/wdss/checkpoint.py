@@ -24,12 +24,23 @@ class CheckpointError(UserError):
     """A file that is not a usable wdss checkpoint."""
 
 
+def _nearby(path: Path) -> str:
+    """The checkpoints beside a missing one (its folder, or the ``checkpoints/`` of a run folder): what was meant."""
+    for folder in (path.parent, path, path / "checkpoints", path.parent / "checkpoints"):
+        if folder.is_dir():
+            found = sorted(p.name for p in folder.glob("*.ckpt"))
+            if found:
+                shown = ", ".join(found[:8]) + (f", ... ({len(found)} in all)" if len(found) > 8 else "")
+                return f"; {folder} holds {shown}"
+    return ""
+
+
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
     """The checkpoint at ``path`` (tensors memory-mapped), once it is known to be a wdss.train checkpoint whose
     hyper-parameters build only allowlisted callables."""
     path = Path(path)
     if not path.is_file():
-        raise CheckpointError(f"checkpoint {path} is not a file")
+        raise CheckpointError(f"checkpoint {path} is not a file{_nearby(path)}")
     if not zipfile.is_zipfile(path):  # torch.save and Lightning write zip archives
         raise CheckpointError(f"{path} is not a checkpoint: not a torch archive (a .ckpt that wdss.train writes)")
     try:
