@@ -136,36 +136,97 @@ def test_profile_buckets_sort_work_by_what_ran():
     assert spent["generated"] == 0
 
 
-@pytest.mark.parametrize("residual", ["bilinear", "joint_bilateral", "learned_bilateral recipe.tap_brdf=true"])
-def test_learn_trains_the_model_and_a_plain_cnn_on_the_same_batches_from_the_same_start(residual):
-    overrides = ["experiment=smoke", *f"recipe.residual={residual}".split()]
-    table = bench.bench_learn(overrides, steps=2, every=1, held=1, epochs=3)
-    cells = {column.header: [float(c.rstrip("%")) for c in column._cells] for column in table.columns}
-    assert cells["step"] == [0, 1, 2]
-    # With a residual and a zero exit both start as the model's upsampling: the same held-out L1.
-    assert cells["model: L1"][0] == pytest.approx(cells["plain CNN: L1"][0], abs=1e-4)
-    assert cells["model: L1 change"][0] == 0.0
-    # Both were trained: the plain CNN's zero last layer moved, so its held-out loss did too.
-    assert any(value != cells["plain CNN: loss"][0] for value in cells["plain CNN: loss"][1:])
+def _cells(table) -> dict[str, list[str]]:
+    return {column.header: list(column._cells) for column in table.columns}
+
+
+@pytest.mark.parametrize(
+    ("residual", "start"),
+    [("bilinear", "bilinear"), ("joint_bilateral", "joint bilateral"), ("learned_bilateral", "kernel")],
+)
+def test_learn_gives_each_arm_its_own_start_and_scores_every_frame_of_the_validation_scenes(
+    residual, start, monkeypatch
+):
+    from wdss.data.datamodule import SceneDataModule
+
+    read, made = [], {}
+    dataset = SceneDataModule._dataset
+
+    def spy(self, split, scale, patch):
+        read.append((split, scale, patch))
+        return dataset(self, split, scale, patch)
+
+    setup = bench._learn_setup
+
+    def keep(overrides, seed):
+        made["cfg"], made["module"], made["datamodule"] = setup(overrides, seed)
+        return made["cfg"], made["module"], made["datamodule"]
+
+    starts = []
+
+    class Recorded(bench.StartArm):
+        def __init__(self, net):
+            super().__init__(net)
+            self.initial = [p.detach().clone() for p in self.parameters()]
+            starts.append(self)
+
+    monkeypatch.setattr(bench, "StartArm", Recorded)
+    monkeypatch.setattr(SceneDataModule, "_dataset", spy)
+    monkeypatch.setattr(bench, "_learn_setup", keep)
+    overrides = ["experiment=smoke", f"recipe.residual={residual}", "recipe.output_space=log", "recipe.tap_brdf=true"]
+    curve, final = bench.bench_learn(overrides, steps=3, every=3, seeds=[0], scales=[2.0, 4.0])
+    # Full frames (no patch) of the validation split, at every scale asked for.
+    assert {("val", 2.0, None), ("val", 4.0, None)} <= set(read)
+    assert not [r for r in read if r[0] == "test"]
+    cells = _cells(curve)
+    assert cells["step"] == ["0", "3"]
+    # With a zero exit and a zero last layer, both networks start exactly where their starts do.
+    for name in ("model", "plain CNN"):
+        assert cells[f"{name} - {start} 2x"][0] == "+0.00" and cells[f"{name} - {start} 4x"][0] == "+0.00"
+    rows = {row: [c[i] for c in list(_cells(final).values())[1:]] for i, row in enumerate(_cells(final)["arm"])}
+    assert list(rows) == [start, "model", "plain CNN", f"model - {start}", f"plain CNN - {start}"]
+    if residual == "learned_bilateral":
+        # Three copies of the kernel (the model's, the start's, the plain CNN's): no weight shared, each trained
+        # by its own arm from the same initial weights.
+        kernels = [made["module"].net.upsampler] + [arm.kernel for arm in starts]
+        assert len(kernels) == 3
+        pointers = [{p.data_ptr() for p in kernel.parameters()} for kernel in kernels]
+        assert all(not (pointers[i] & pointers[j]) for i in range(3) for j in range(i + 1, 3))
+        for kernel in kernels:
+            moved = [not torch.equal(p, q) for p, q in zip(kernel.parameters(), starts[0].initial, strict=True)]
+            assert any(moved)
+        weights = [torch.cat([p.flatten() for p in kernel.parameters()]) for kernel in kernels]
+        assert not torch.equal(weights[0], weights[1]) and not torch.equal(weights[1], weights[2])
+
+
+def test_learn_states_each_gain_with_its_interval_over_seeds():
+    overrides = ["experiment=smoke", "recipe.residual=learned_bilateral"]
+    curve, final = bench.bench_learn(overrides, steps=2, every=1, seeds=[0, 1], scales=[3.0])
+    assert _cells(curve)["step"] == ["0", "1", "2"]
+    gain = _cells(final)["PSNR 3x"][3]  # model - kernel: mean +- half-width (seed 0, seed 1)
+    mean, rest = gain.split(" +- ")
+    half, per_seed = rest.split(" (")
+    values = [float(v) for v in per_seed.rstrip(")").split()]
+    assert len(values) == 2 and float(mean) == pytest.approx(sum(values) / 2, abs=0.006)
+    assert float(half) >= 0
 
 
 def test_learn_refuses_a_model_without_weights():
     with pytest.raises(SystemExit, match="trainable single-frame model"):
-        bench.bench_learn(["experiment=smoke", "variant=bilinear_demodulated"], steps=1, every=1, held=1, epochs=2)
+        bench.bench_learn(
+            ["experiment=smoke", "variant=bilinear_demodulated"], steps=1, every=1, seeds=[0], scales=[2.0]
+        )
+
+
+def test_learn_refuses_data_without_validation_scenes():
+    with pytest.raises(SystemExit, match="data.splits.val names none"):
+        bench.bench_learn(["experiment=smoke", "data.splits.val=[]"], steps=1, every=1, seeds=[0], scales=[2.0])
 
 
 def test_learn_reads_the_reference_buffers_for_a_model_that_does_not():
-    # NSRR reads LR G-buffers only: the HR G-buffers the plain CNN needs are read for it.
-    table = bench.bench_learn(["experiment=smoke", "variant=nsrr"], steps=1, every=1, held=1, epochs=3)
-    assert [float(c) for c in table.columns[0]._cells] == [0, 1]
-
-
-def test_learn_measures_tone_mapped_l1_whatever_the_loss_terms():
-    # Squared error only: the loss has no L1 term, the L1 columns still compare both from the same start.
-    overrides = ["experiment=smoke", "recipe.residual=bilinear", "loss.weights.l1=0", "loss.weights.l2=1"]
-    table = bench.bench_learn(overrides, steps=1, every=1, held=1, epochs=3)
-    cells = {column.header: column._cells for column in table.columns}
-    assert cells["model: L1"][0] == cells["plain CNN: L1"][0] and float(cells["model: L1"][0]) > 0
+    # NSRR reads LR G-buffers only: the HR G-buffers the plain CNN and the bilinear start need are read for it.
+    curve, _ = bench.bench_learn(["experiment=smoke", "variant=nsrr"], steps=1, every=1, seeds=[0], scales=[2.0])
+    assert _cells(curve)["step"] == ["0", "1"]
 
 
 @pytest.mark.slow  # a DataLoader with two worker processes: ~15 s

@@ -12,7 +12,7 @@ import math
 import statistics
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import torch
@@ -23,6 +23,7 @@ from wdss.data.preprocess import prediction_color
 from wdss.data.sampling import upsample as upsample_lr
 from wdss.memory import memory_retained, restart_with_retained_memory
 from wdss.model.blocks import from_log, to_log
+from wdss.model.joint_bilateral import joint_bilateral_upsample
 
 BASES = ("haar", "db4", "sym4")
 TABLE_WIDTH = 160  # columns of a table printed off a terminal
@@ -704,15 +705,46 @@ def bench_noise(folders: Sequence[str], frames: Sequence[int] | None, noise_seed
     return table
 
 
+class StartArm(torch.nn.Module):
+    """Where a residual network starts, on its own: a copy of the model's learned kernel (trained by an optimiser
+    of its own), the parameter-free upsampler it adds to (``recipe.residual=bilinear|joint_bilateral``), or, for a
+    network without a residual, bilinear upsampling of the demodulated irradiance."""
+
+    def __init__(self, net: torch.nn.Module) -> None:
+        super().__init__()
+        kernel = getattr(net, "upsampler", None)
+        self.kernel = copy.deepcopy(kernel) if kernel is not None else None
+        self.residual = getattr(net, "residual", "none")
+        self.name = (
+            "kernel"
+            if self.kernel is not None
+            else "joint bilateral"
+            if self.residual == "joint_bilateral"
+            else "bilinear"
+        )
+
+    def upsample(self, batch: dict) -> torch.Tensor:
+        lr, gbuffer, guide, jitter = batch["lr"], batch["gbuffer"], batch.get("lr_guide"), batch.get("lr_jitter")
+        if self.kernel is not None:
+            return self.kernel.upsample(lr, gbuffer, batch.get("brdf"), batch.get("lr_brdf"), guide, jitter)
+        if self.residual == "joint_bilateral":
+            return joint_bilateral_upsample(lr.float(), gbuffer.float(), lr_guide=guide, lr_jitter=jitter)
+        return upsample_lr(lr.float(), gbuffer.shape[-2:], "bilinear", jitter)
+
+    def forward(self, batch: dict) -> dict:
+        irradiance = self.upsample(batch)
+        return {"irradiance": irradiance, "color": prediction_color(irradiance, batch), "coefficients": None}
+
+
 class PlainReference(torch.nn.Module):
     """What a plain CNN learns from the same inputs and the same start: four 3x3 convolutions at full resolution
-    on log1p of the upsampled LR irradiance (``upsample``: the model's residual upsampler, else bilinear), the
-    G-buffers, the spatial mask (and log1p history when the batch has it), predicting a log1p-space correction
-    of that upsampling; the last layer starts at zero. Sized from an example ``batch``."""
+    on log1p of its start's upsampled LR irradiance (``start``, a :class:`StartArm`: its own copy of the model's
+    kernel, trained with it), the G-buffers, the spatial mask (and log1p history when the batch has it), predicting
+    a log1p-space correction of that upsampling; the last layer starts at zero. Sized from an example ``batch``."""
 
-    def __init__(self, batch: dict, upsample: Callable | None = None, width: int = 32) -> None:
+    def __init__(self, batch: dict, start: StartArm, width: int = 32) -> None:
         super().__init__()
-        self.upsample = upsample
+        self.start = start
         convs = [self.inputs(batch)[1].shape[1], width, width, width, 3]
         layers: list[torch.nn.Module] = []
         for a, b in zip(convs, convs[1:], strict=False):
@@ -722,15 +754,7 @@ class PlainReference(torch.nn.Module):
         torch.nn.init.zeros_(self.body[-1].bias)
 
     def inputs(self, batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
-        size = batch["gbuffer"].shape[-2:]
-        jitter = batch.get("lr_jitter")
-        if self.upsample is None:
-            upsampled = upsample_lr(batch["lr"], size, "bilinear", jitter)
-        else:  # the start the model's own residual has: its guide and jitter
-            upsampled = self.upsample(
-                batch["lr"], batch["gbuffer"], batch.get("brdf"), batch.get("lr_brdf"), batch.get("lr_guide"), jitter
-            )
-        base = to_log(upsampled)
+        base = to_log(self.start.upsample(batch))
         parts = [base, batch["gbuffer"], batch["spatial_mask"]]
         if "history" in batch:
             parts.append(to_log(batch["history"]))
@@ -742,13 +766,8 @@ class PlainReference(torch.nn.Module):
         return {"irradiance": irradiance, "color": prediction_color(irradiance, batch), "coefficients": None}
 
 
-def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epochs: int) -> Table:
-    """Does a configuration learn in a few hundred steps? Its training loss on ``held`` batches it never trains
-    on (patches of the training scenes, drawn as training draws them), every ``every`` Adam steps, beside a plain
-    CNN (:class:`PlainReference`) trained on the same batches in the same order with the same loss, learning rate
-    and gradient clipping. Minutes where a training run takes tens of them; the reference says how much of the
-    loss the inputs let a network take in that many steps. Compare the L1 columns (tone-mapped, as the metrics
-    see it, whatever the loss: the model's total also holds its wavelet term)."""
+def _learn_setup(overrides: Sequence[str], seed: int) -> tuple:
+    """One seed's configuration, training module and data module (fit and validation splits set up)."""
     from hydra import compose, initialize_config_dir
     from hydra.core.hydra_config import HydraConfig
 
@@ -757,75 +776,135 @@ def bench_learn(overrides: Sequence[str], steps: int, every: int, held: int, epo
 
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         preset = [] if any(o.startswith("experiment=") for o in overrides) else ["experiment=cpu"]
-        cfg = compose("train", overrides=[*preset, "data.num_workers=0", *overrides], return_hydra_config=True)
+        settings = [*preset, "data.num_workers=0", *overrides, f"seed={seed}"]
+        cfg = compose("train", overrides=settings, return_hydra_config=True)
     HydraConfig.instance().set_config(cfg)
-    torch.manual_seed(int(cfg.seed))
+    torch.manual_seed(seed)
     module = instantiate(cfg.model, tonemap_exposure=cfg.get("tonemap_exposure"))
     if not module.trainable or module.temporal == "recurrent":
         raise SystemExit("bench learn: needs a trainable single-frame model (not a baseline, not temporal=recurrent)")
-    # The reference's inputs too: a model may read other buffers (NSRR reads LR G-buffers, not HR ones).
-    inputs = sorted(set(module.inputs) | {"lr", "gbuffer", "spatial_mask"})
+    # The start's and the reference's inputs too: a model may read other buffers (NSRR reads LR G-buffers only).
+    inputs = sorted(set(module.inputs) | {"lr", "gbuffer", "spatial_mask", "lr_jitter"})
     datamodule = instantiate(cfg.data, inputs=inputs, test_inputs=list(module.test_inputs))
+    if not datamodule.splits.get("val", ((), {}))[0]:
+        raise SystemExit("bench learn: it scores the validation scenes, and data.splits.val names none")
+    datamodule.check(["train", "val"])
+    datamodule.prepare_data()
     datamodule.setup("fit")
-    loader = datamodule.train_dataloader()
-    batches = []
-    for epoch in range(epochs):
+    return cfg, module, datamodule
+
+
+def _epochs(loader) -> Iterator:
+    """The training loader's batches, epoch after epoch (each epoch drawn as training draws it)."""
+    epoch = 0
+    while True:
         loader.sampler.set_epoch(epoch)
-        batches += list(loader)
-    if len(batches) <= held:
-        raise SystemExit(f"bench learn: {len(batches)} batches in {epochs} epochs, {held} held out: raise --epochs")
-    held_out, pool = batches[:held], batches[held:]
-    # The same start as the model's: its residual upsampler (bilinear or joint bilateral), else bilinear.
-    upsample = module.net._upsample if getattr(module.net, "residual", "none") != "none" else None
-    reference = PlainReference(held_out[0], upsample)
-    nets = {"model": (module.net, module), "plain CNN": (reference, reference)}
-    lr = float(cfg.model.optimizer.lr)
-    clip = cfg.trainer.get("gradient_clip_val")
-    optimizers = {name: torch.optim.Adam(net.parameters(), lr=lr) for name, (net, _) in nets.items()}
+        yield from loader
+        epoch += 1
 
-    def tone_l1(batch: dict, out: dict) -> float:
-        """L1 on the metric's display values, whatever the loss's terms and space."""
-        target = module.tone(batch["target"], batch["target"])
-        shown = out["display"] if out.get("display") is not None else module.tone(out["color"], batch["target"])
-        return float((shown - target).abs().mean())
 
-    def held_loss(name: str) -> dict[str, float]:
-        net, forward = nets[name]
+def _held_out_psnr(arms: dict, loaders: dict, metrics: Callable, datamodule) -> dict[str, dict[float, float]]:
+    """Each arm's mean tone-mapped PSNR (dB) over every full frame of ``loaders`` (scale -> validation loader)."""
+    scores: dict[str, dict[float, float]] = {}
+    for name, net in arms.items():
         net.eval()
         with torch.no_grad():
-            outs = [(b, forward(b)) for b in held_out]
-            total = sum(float(module._loss(b, out)["total"]) for b, out in outs) / len(outs)
-            l1 = sum(tone_l1(b, out) for b, out in outs) / len(outs)
+            for scale, loader in loaders.items():
+                values = []
+                for raw in loader:
+                    batch = datamodule.on_after_batch_transfer(raw, 0)
+                    psnr = metrics(net(batch)["color"].float(), batch["target"].float(), flip=False)["psnr"]
+                    values += [v for v in psnr.tolist() if math.isfinite(v)]  # identical images: infinite
+                scores.setdefault(name, {})[scale] = statistics.fmean(values)
         net.train()
-        return {"total": total, "l1": l1}
+    return scores
 
-    table = Table(title=f"learn: held-out training loss ({held} batches), Adam lr {lr:g}, {' '.join(overrides)}")
-    table.add_column("step", justify="right")
+
+def bench_learn(
+    overrides: Sequence[str], steps: int, every: int, seeds: Sequence[int], scales: Sequence[float]
+) -> list[Table]:
+    """What the network adds over where it starts, on scenes it never trained on. Three arms train on the same
+    patches of the training scenes in the same order, with the same loss, Adam learning rate (constant) and gradient
+    clipping, each with its own optimiser and its own copy of the start's weights: the model (its network and its
+    learned kernel), the start alone (:class:`StartArm`: that kernel trained by itself; a parameter-free upsampler
+    stays as it is) and a plain full-resolution CNN on a start of its own (:class:`PlainReference`). Every ``every``
+    steps each arm is scored on every full frame of the validation scenes at each of ``scales``, through the tests'
+    metric path (tone-mapped PSNR). Tables: per step, the start's PSNR and each network's gain over its own start
+    (means over ``seeds``); at the last step, every arm and gain with its 95% t-interval over seeds (paired)."""
+    from wdss.report import interval
+
+    scores: dict[int, list[dict[str, dict[float, float]]]] = {}  # step -> per seed: arm -> scale -> PSNR
+    begin, start_name = time.perf_counter(), "start"
+    for seed in seeds:
+        cfg, module, datamodule = _learn_setup(overrides, seed)
+        start = StartArm(module.net)  # copied before any step: every arm starts from the same kernel weights
+        start_name = start.name
+        loader = datamodule.train_dataloader()
+        example = datamodule.on_after_batch_transfer(next(iter(loader)), 0)
+        arms = {start.name: start, "model": module, "plain CNN": PlainReference(example, StartArm(module.net))}
+        lr, clip = float(cfg.model.optimizer.lr), cfg.trainer.get("gradient_clip_val")
+        optimizers = {  # a parameter-free start has nothing to train
+            name: torch.optim.Adam(params, lr=lr) for name, net in arms.items() if (params := list(net.parameters()))
+        }
+        held = {
+            scale: datamodule._loader(datamodule._dataset("val", scale, None), datamodule.eval_batch_size, train=False)
+            for scale in scales
+        }
+        stream = _epochs(loader)
+        for step in range(steps + 1):
+            if step % every == 0 or step == steps:
+                scores.setdefault(step, []).append(_held_out_psnr(arms, held, module.metrics, datamodule))
+                shown = " | ".join(
+                    f"{name} " + " ".join(f"{v:.2f}" for v in per_scale.values())
+                    for name, per_scale in scores[step][-1].items()
+                )
+                print(f"bench learn: seed {seed} step {step}/{steps} ({time.perf_counter() - begin:.0f} s): {shown}")
+            if step == steps:
+                break
+            batch = datamodule.on_after_batch_transfer(next(stream), 0)
+            for name, optimizer in optimizers.items():
+                loss = module._loss(batch, arms[name](batch))["total"]
+                optimizer.zero_grad()
+                loss.backward()
+                if clip:
+                    torch.nn.utils.clip_grad_norm_(arms[name].parameters(), float(clip))
+                optimizer.step()
+
+    names = datamodule.splits["val"][0]
+    nets = [name for name in scores[0][0] if name != start_name]
+    setting = f"Adam lr {lr:g}" + (f", clip {float(clip):g}" if clip else "") + f"; {' '.join(overrides)}"
+    seeds_text = " ".join(map(str, seeds))
+
+    def gains(step: int, name: str, scale: float) -> list[float]:
+        return [seed[name][scale] - seed[start_name][scale] for seed in scores[step]]
+
+    curve = Table(
+        title=f"learn: PSNR (dB) on every frame of the validation scenes ({', '.join(names)}), mean of seeds "
+        f"{seeds_text}; {setting}"
+    )
+    curve.add_column("step", justify="right")
+    columns = [(start_name, s) for s in scales] + [(f"{n} - {start_name}", s) for n in nets for s in scales]
+    for heading, scale in columns:
+        curve.add_column(f"{heading} {scale:g}x", justify="right")
+    for step in sorted(scores):
+        row = [f"{statistics.fmean(seed[start_name][s] for seed in scores[step]):.2f}" for s in scales]
+        row += [f"{statistics.fmean(gains(step, n, s)):+.2f}" for n in nets for s in scales]
+        curve.add_row(str(step), *row)
+
+    def cell(values: list[float], sign: str) -> str:
+        mean, half = interval(values)
+        spread = f" +- {half:.2f}" if math.isfinite(half) else ""
+        return f"{mean:{sign}.2f}{spread} ({' '.join(f'{v:{sign}.2f}' for v in values)})"
+
+    final = Table(title=f"learn: step {steps}, mean +- 95% half-width over seeds {seeds_text} (each seed)")
+    final.add_column("arm")
+    for scale in scales:
+        final.add_column(f"PSNR {scale:g}x", justify="right")
+    for name in scores[steps][0]:
+        final.add_row(name, *(cell([seed[name][s] for seed in scores[steps]], "") for s in scales))
     for name in nets:
-        for column in ("loss", "L1", "L1 change"):  # L1: tone-mapped
-            table.add_column(f"{name}: {column}", justify="right")
-    first: dict[str, float] = {}
-    start = time.perf_counter()
-    for step in range(steps + 1):
-        if step % every == 0 or step == steps:
-            row = [str(step)]
-            for name in nets:
-                loss = held_loss(name)
-                first.setdefault(name, loss["l1"])
-                row += [f"{loss['total']:.4f}", f"{loss['l1']:.4f}", f"{loss['l1'] / first[name] - 1:+.1%}"]
-            table.add_row(*row)
-            print(f"bench learn: step {step}/{steps} ({time.perf_counter() - start:.0f} s): " + " | ".join(row[1:]))
-        if step == steps:
-            break
-        batch = pool[step % len(pool)]
-        for name, (net, forward) in nets.items():
-            loss = module._loss(batch, forward(batch))["total"]
-            optimizers[name].zero_grad()
-            loss.backward()
-            if clip:
-                torch.nn.utils.clip_grad_norm_(net.parameters(), float(clip))
-            optimizers[name].step()
-    return table
+        final.add_row(f"{name} - {start_name}", *(cell(gains(steps, name, s), "+") for s in scales))
+    return [curve, final]
 
 
 # --------------------------------------------------------------------------------------------------------
@@ -1016,12 +1095,14 @@ def main(argv: Sequence[str] | None = None, *, restart: bool = False) -> None:
     noise.add_argument("--frames", type=int, nargs="+", default=None, help="default: every frame")
     noise.add_argument("--noise-seed", type=int, default=1)
     noise.add_argument("--record", action="store_true", help="write the ceiling into each sequence.json (noise)")
-    learn = sub.add_parser("learn", help="held-out training loss of a configuration beside a plain CNN's")
+    learn = sub.add_parser(
+        "learn", help="what a network adds over its own start (kernel), on the validation scenes, over seeds"
+    )
     learn.add_argument("overrides", nargs="*", help="train config overrides (default experiment=cpu)")
     learn.add_argument("--steps", type=int, default=300)
-    learn.add_argument("--every", type=int, default=50)
-    learn.add_argument("--held", type=int, default=6, help="batches held out (never trained on)")
-    learn.add_argument("--epochs", type=int, default=4, help="epochs of batches drawn (held + training pool)")
+    learn.add_argument("--every", type=int, default=100, help="score the arms every this many steps")
+    learn.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    learn.add_argument("--scales", type=float, nargs="+", default=[2.0, 3.0, 4.0])
     band = sub.add_parser("bandlimit", help="the best PSNR of an output without detail above the LR grid's Nyquist")
     band.add_argument("root", help="a dataset folder (its sequences), e.g. data/mini")
     band.add_argument("--sequences", nargs="+", default=None, help="default: every sequence under root")
@@ -1072,7 +1153,8 @@ def main(argv: Sequence[str] | None = None, *, restart: bool = False) -> None:
         table.caption = caption
         console.print(table)
     elif args.what == "learn":
-        console.print(bench_learn(args.overrides, args.steps, args.every, args.held, args.epochs))
+        for table in bench_learn(args.overrides, args.steps, args.every, args.seeds, args.scales):
+            console.print(table)
     elif args.what == "guidance":
         console.print(
             bench_guidance(args.root, args.sequences, args.scales, args.properties, args.checkpoints, args.knee)
