@@ -225,7 +225,7 @@ class SceneLayout(ABC):
 
 
 class UnrealLayout(SceneLayout):
-    """The WDSS authors' Unreal Engine capture layout (REFERENCE.md section 4)."""
+    """The WDSS authors' Unreal Engine capture layout (docs/reference.md section 4)."""
 
     name = "unreal"
     SLOTS: dict[str, Slot] = {

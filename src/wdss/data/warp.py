@@ -1,4 +1,4 @@
-"""Temporal reprojection and the spatial and temporal masks (REFERENCE.md sections 4 and 6).
+"""Temporal reprojection and the spatial and temporal masks (docs/reference.md sections 4 and 6).
 
 Motion vectors are in high-resolution pixels, current minus previous screen position, with y pointing up.
 A pixel at column x, row y of the current frame was at column ``x - mv_x`` and row ``y + mv_y`` (rows grow

@@ -1,4 +1,4 @@
-"""Building blocks of the WDSS network (REFERENCE.md section 2): all 3x3 convolutions with bias, no norms."""
+"""Building blocks of the WDSS network (docs/reference.md section 2): all 3x3 convolutions with bias, no norms."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ default (the paper: 6 residual blocks at 128 channels).
 
 ``skip=True`` (``recipe.skip``, which ``experiment=cpu`` turns on) adds the output to the bilinearly upsampled LR
 irradiance (in log1p space), so FuseSR starts near ``bilinear_demodulated``: without it, a few hundred CPU steps
-leave regions rare in the training patches (the sky) far too dark (README, "methods" sweep).
+leave regions rare in the training patches (the sky) far too dark (docs/results.md, "methods" sweep).
 """
 
 from __future__ import annotations

@@ -20,8 +20,8 @@ learning it (on data/mini every seed moved it up).
 
 Why: at CPU scale the WDSS network barely leaves its starting point in a few hundred steps, while this kernel
 (625 parameters, 690 with ``tap_brdf``) learns a correction that generalises to unseen scenes within a hundred
-(README, "where CPU models stand"). It is the residual base ``recipe.residual=learned_bilateral`` of the network
-and a model of its own (``model=learned_bilateral``), so the two contributions are separate ablation rows.
+(docs/results.md, "Where CPU models stand"). It is the residual base ``recipe.residual=learned_bilateral`` of the
+network and a model of its own (``model=learned_bilateral``), so the two contributions are separate ablation rows.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Training losses, each term weighted by config, on remodulated colour (REFERENCE.md section 6).
+"""Training losses, each term weighted by config, on remodulated colour (docs/reference.md section 6).
 
 The image terms compare colour in one space: ``linear`` HDR (the paper), ``log`` (``log1p``, DFASR), or
 ``tonemapped`` (the metric's display transform, so the loss weighs errors as PSNR/SSIM/FLIP will).

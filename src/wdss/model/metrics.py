@@ -1,4 +1,4 @@
-"""Image metrics on tone-mapped, remodulated images (REFERENCE.md section 6): PSNR, SSIM, FLIP, LPIPS.
+"""Image metrics on tone-mapped, remodulated images (docs/reference.md section 6): PSNR, SSIM, FLIP, LPIPS.
 
 PSNR (peak 1) and SSIM (Gaussian window 11, sigma 1.5) come from torchmetrics, FLIP from NVIDIA's
 ``flip-evaluator`` (LDR on the tone-mapped images, HDR on linear colour), LPIPS-VGG from

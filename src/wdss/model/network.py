@@ -1,4 +1,4 @@
-"""The WDSS network (REFERENCE.md section 2): extractors -> fusion + Fourier INR -> subbands -> synthesis.
+"""The WDSS network (docs/reference.md section 2): extractors -> fusion + Fourier INR -> subbands -> synthesis.
 
 A pure ``nn.Module``. Inputs are the batch tensors of :mod:`wdss.data` (``lr``, ``gbuffer``,
 ``spatial_mask``, ``history``, ``temporal_mask``, ``scale``); the output is high-resolution irradiance

@@ -8,7 +8,7 @@ widths by default; its loss in the paper is 1 - SSIM + 0.1 perceptual (here: the
 
 ``skip=True`` (not NSRR's design; ``recipe.skip``, which ``experiment=cpu`` turns on) adds the U-Net's output to the
 bilinearly upsampled LR colour (in log1p space): without it, a few hundred CPU steps learn the training scenes' mean
-colour rather than to carry the LR colour through (README, "methods" sweep).
+colour rather than to carry the LR colour through (docs/results.md, "methods" sweep).
 """
 
 from __future__ import annotations

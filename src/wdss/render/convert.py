@@ -1,6 +1,6 @@
 """Blender's passes -> the buffers of the authors' Unreal layout (pure numpy, no Blender needed).
 
-Conventions (REFERENCE.md section 5, verified on bpy 5.0.1):
+Conventions (docs/reference.md section 5, verified on bpy 5.0.1):
 
 * Combined: linear HDR radiance -> ``color``.
 * Depth.Z: planar camera depth, 1e10 on the background -> ``depth`` with the background mapped to 0 (as the
