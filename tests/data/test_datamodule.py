@@ -151,16 +151,33 @@ def test_same_seed_same_batches(root):
     torch.testing.assert_close(a["target"], b["target"])
 
 
-def test_flips_need_camera_metadata(root):
+def test_flips_mirror_only_sequences_with_camera_rotations(root, caplog):
+    """Mirroring world-space normals needs each frame's camera: frames without one are read unmirrored, said once."""
     dm = SceneDataModule(root, {"train": ["seq_a"]}, ["gbuffer", "motion"], patch_size=12, batch_size=2, flips=True)
     dm.setup("fit")
     assert next(iter(dm.train_dataloader()))["gbuffer"].shape == (2, 11, 12, 12)
-    dm = SceneDataModule(root, {"train": ["seq_b"]}, ["gbuffer"], patch_size=12, batch_size=2, flips=True)
-    dm.setup("fit")
-    torch.manual_seed(1)  # some sample of the epoch is flipped
-    with pytest.raises(ValueError, match="needs the camera rotation"):
-        for _ in dm.train_dataloader():
-            pass
+    assert not dm.datasets["train"].unmirrored
+    with caplog.at_level("WARNING", logger="wdss.data.dataset"):
+        dm = SceneDataModule(root, {"train": ["seq_b"]}, ["gbuffer"], patch_size=None, batch_size=1, flips=True)
+        dm.setup("fit")
+    assert "seq_b has no camera rotation per frame in sequence.json" in caplog.text
+    plain = SceneDataModule(root, {"train": ["seq_b"]}, ["gbuffer"], patch_size=None, batch_size=1, flips=False)
+    plain.setup("fit")
+    drawn, read = dm.datasets["train"], plain.datasets["train"]
+    for epoch in range(4):  # every draw of four epochs: no sample of seq_b is mirrored
+        for i in range(len(drawn)):
+            a, b = drawn[(i, epoch)]["hr"], read[(i, epoch)]["hr"]
+            assert all(torch.equal(torch.as_tensor(a[k]), torch.as_tensor(b[k])) for k in b)
+    # With the cameras it has, seq_a is mirrored: some sample differs from its unflipped read.
+    flipped = FrameDataset([Sequence(root / "seq_a")], ["gbuffer"], patch=None, flips=True, seed=3)
+    unflipped = FrameDataset([Sequence(root / "seq_a")], ["gbuffer"], patch=None, flips=False, seed=3)
+    assert any(
+        not torch.equal(
+            torch.as_tensor(flipped[(i, e)]["hr"]["normal"]), torch.as_tensor(unflipped[(i, e)]["hr"]["normal"])
+        )
+        for e in range(4)
+        for i in range(len(flipped))
+    )
 
 
 def test_configuration_errors_are_clear(root):
@@ -586,6 +603,12 @@ def test_a_folder_of_other_wdss_renders_is_never_resumed_as_the_preset(tmp_path,
     with pytest.raises(SceneError, match="data.splits.train: 'train_000' not under"):
         dm.check()
     assert rendered == [] and sorted(p.name for p in other.iterdir()) == ["heldout_400"]
+    # Frames another tool wrote, with a sequence.json of its own: read as they are, never judged as a stale preset.
+    foreign = tmp_path / "unreal"
+    write_sequence(foreign / "shot_a", frames=(0, 1), size=(8, 8), scales=())
+    (foreign / "shot_a" / "sequence.json").write_text(json.dumps({"fps": 24}))
+    SceneDataModule(foreign, {"train": ["shot_a"]}, ["target"], prepare=prepare).prepare_data()
+    assert rendered == []
     # Its own folder, stopped part-way, resumes.
     own = tmp_path / "mini"
     write_sequence(own / "train_000", frames=(0, 1), size=(8, 8), scales=())

@@ -101,7 +101,7 @@ def check_sequence(
         if isinstance(sampling, dict):
             lines.append("  sampling: " + ", ".join(f"{k} {v}" for k, v in sorted(sampling.items())))
     else:
-        lines.append("  no sequence.json: no camera matrices (flips off), LR assumed unjittered")
+        lines.append("  no sequence.json: no camera rotations (read unmirrored), LR assumed unjittered")
     middle = scene.frames[len(scene.frames) // 2]
     lines += [f"  frame {middle}: {line}" for line in _ranges(scene, middle)]
     needs = needs or {}

@@ -250,6 +250,9 @@ class SceneDataModule(L.LightningDataModule):
         if not self.root.exists():
             self.prepare(self.root)
             return
+        resumes = getattr(self.prepare, "resumes", None)
+        if resumes is not None and not resumes(self.root):
+            return  # a folder of other frames (one's own, foreign): never rendered into, nor judged as a preset's
         from wdss.render.sequence import stale_render
 
         rendered = {}
@@ -272,8 +275,7 @@ class SceneDataModule(L.LightningDataModule):
             or len(rendered[name].get("render_seconds") or {})
             < int((rendered[name].get("settings") or {}).get("frames", -1)) + 1
         )
-        resumes = getattr(self.prepare, "resumes", None)
-        if rendered and unfinished and (resumes is None or resumes(self.root)):
+        if rendered and unfinished:
             print(f"wdss: {self.root}: resuming the render of {', '.join(unfinished)}", flush=True)
             self.prepare(self.root)
 

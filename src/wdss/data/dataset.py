@@ -201,6 +201,18 @@ class FrameDataset(Dataset):
         self.sequence_length = sequence_length
         self.seed = seed
         self.need = requirements(self.keys, self.prep)
+        # Mirroring world-space normals needs each frame's camera rotation (sequence.json): a sequence without them
+        # (foreign frames) is read unmirrored rather than refused part-way through training.
+        self.unmirrored = set()
+        if flips and any("normal" in buffers for buffers in self.need.values()):
+            self.unmirrored = {i for i, s in enumerate(self.sequences) if any(s.camera(f) is None for f in s.frames)}
+        if self.unmirrored:
+            log.warning(
+                "data.flips: %s %s no camera rotation per frame in sequence.json (needed to mirror world-space "
+                "normals): %s not mirrored",
+                ", ".join(self.sequences[i].name for i in sorted(self.unmirrored)),
+                *(("has", "its frames are") if len(self.unmirrored) == 1 else ("have", "their frames are")),
+            )
         self.warps = bool(_WARPED & set(self.keys))
         self.no_emission = self._check_emission()
         back = max((_OFFSET[role] for role, buffers in self.need.items() if buffers), default=0)
@@ -350,6 +362,8 @@ class FrameDataset(Dataset):
         flips = (False, False)
         if self.flips:
             flips = (bool(torch.rand((), generator=rng) < 0.5), bool(torch.rand((), generator=rng) < 0.5))
+            if seq_index in self.unmirrored:  # drawn all the same: the other samples' draws do not move
+                flips = (False, False)
         for step in steps:
             # Where the LR pixels were shaded: a jittered native frame's offset; point samples are taken here.
             jitter = torch.tensor(seq.lr_jitter(step["frame"]) if lr_height else (0.0, 0.0), dtype=torch.float32)
