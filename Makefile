@@ -37,7 +37,7 @@ $(VENV)/.installed-cluster: $(VENV)/.installed
 data: setup-render ## render the default dataset (data/mini, a few minutes) ahead of training
 	$(PY) -m wdss.render -cn mini
 
-data-bench: setup-render ## render the benchmark dataset (data/bench: 54 scenes, noise ceilings; ~1 hour, resumable)
+data-bench: setup-render ## render the benchmark dataset (data/bench: 54 scenes, noise ceilings; ~20 minutes on 2 cores, resumable)
 	$(PY) -m wdss.render -cn bench
 
 pack: setup-render ## pack data/mini into data/mini.packed (read patch by patch; training uses it when present)
