@@ -71,7 +71,7 @@ def test_ddp_on_two_cpu_processes_logs_once_reduces_over_ranks_and_resumes(tmp_p
     assert "Initializing distributed: GLOBAL_RANK: 1, MEMBER: 2/2" in done.stderr
     [folder] = (outputs / "runs").iterdir()  # rank 1 ran in rank 0's folder, with a log file of its own
     names = sorted(p.name for p in folder.iterdir())
-    assert names == [".hydra", "checkpoints", "mlflow_run_id", "run_name", "train.log", "train_rank1.log"], names
+    assert names == [".hydra", "checkpoints", "mlflow_run_id", "run_key", "run_name", "train.log", "train_rank1.log"]
     client = MlflowClient(f"sqlite:///{tmp_path}/mlflow.db")
     experiment = client.get_experiment_by_name("wdss")
     [run] = client.search_runs([experiment.experiment_id])  # rank 1 made no run

@@ -14,9 +14,10 @@ from wdss.report import overrides, report, table_scale
 SEEDS = (0, 1, 2)
 
 
-def fake_sweep(root, name: str, jobs: list[tuple[dict[str, str], dict[str, float], str]]) -> str:
+def fake_sweep(root, name: str, jobs: list[tuple[dict[str, str], dict[str, float], str]], tags=None, old=True) -> str:
     """A parent run tagged ``sweep=name`` and one nested run per job (overrides, metrics, status), as
-    ``wdss.train`` logs them: the run named by its overrides, the variant and seed tags, the tone-map params."""
+    ``wdss.train`` logs them: the variant and seed tags (and ``tags[i]``), the tone-map params, and the run named
+    by its overrides (``old``: as before the tag ``overrides``) or variant first with the tag ``overrides``."""
     from mlflow import MlflowClient
 
     uri = f"sqlite:///{root}/mlflow.db"
@@ -24,10 +25,19 @@ def fake_sweep(root, name: str, jobs: list[tuple[dict[str, str], dict[str, float
     experiment = client.create_experiment(name, artifact_location=(root / "artifacts").as_uri())
     parent = client.create_run(experiment, run_name=f"sweep {name}", tags={"sweep": name}, start_time=1)
     for i, (job, metrics, status) in enumerate(jobs):
+        given = ",".join(f"{k}={v}" for k, v in sorted(job.items()))
+        rest = [f"{k.rsplit('.', 1)[-1]}={v}" for k, v in sorted(job.items()) if k not in ("variant", "seed")]
         run = client.create_run(
             experiment,
-            run_name=",".join(f"{k}={v}" for k, v in sorted(job.items())),
-            tags={"mlflow.parentRunId": parent.info.run_id, "sweep": name, "variant": job["variant"], "seed": "0"},
+            run_name=given if old else " · ".join([job["variant"], *rest, f"seed{job.get('seed', 0)}", "mini"]),
+            tags={
+                "mlflow.parentRunId": parent.info.run_id,
+                "sweep": name,
+                "variant": job["variant"],
+                "seed": "0",
+                **({} if old else {"overrides": given}),
+                **(tags[i] if tags else {}),
+            },
             start_time=10 + i,
         )
         client.log_param(run.info.run_id, "model.tonemap_name", "hable")
@@ -194,6 +204,28 @@ def test_other_axes_than_the_seed_split_rows_and_runs_names_parse_with_lists(tmp
     assert overrides(Run) == {"data.test_scales": "[2.0,3.0]", "seed": "1", "variant": "none"}
 
 
+def test_runs_named_variant_first_are_read_by_their_overrides_tag(tmp_path):
+    jobs = [
+        ({"variant": "swt_haar", "data.patch_size": str(p), "seed": str(s)}, {"test/psnr_2x": 30.0 + p / 100 + s}, "")
+        for p in (24, 48)
+        for s in (0, 1)
+    ]
+    uri = fake_sweep(tmp_path, "ablation_arch", [(j, m, "FINISHED") for j, m, _ in jobs], old=False)
+    out = report("ablation_arch", tracking_uri=uri, out_dir=tmp_path / "reports")
+    _, rows = body((out / "table.md").read_text())
+    assert list(rows) == ["SWT-haar, data.patch_size=24", "SWT-haar, data.patch_size=48"]
+
+    class Run:  # a name that leads with the variant is never parsed as overrides
+        class data:
+            tags = {"mlflow.runName": "swt_haar · patch_size=48 · seed0 · mini"}
+
+    assert overrides(Run) == {}
+    Run.data.tags = {**Run.data.tags, "overrides": "data.patch_size=48,seed=0,variant=swt_haar"}
+    assert overrides(Run) == {"data.patch_size": "48", "seed": "0", "variant": "swt_haar"}
+    Run.data.tags["overrides"] = ""  # a run of the defaults
+    assert overrides(Run) == {}
+
+
 def test_the_table_scale_follows_the_sweep():
     assert table_scale("methods", ["3x"]) == "3x"  # its only test scale
     assert table_scale("methods", ["2x", "3x", "4x"]) == "3x"  # the paper's methods table
@@ -306,3 +338,116 @@ def test_a_parent_whose_children_read_other_data_is_not_averaged_as_seeds(tmp_pa
         report(parent=training, tracking_uri=uri, out_dir=tmp_path)
     with pytest.raises(SystemExit, match="no run nope"):
         report(runs=["nope"], tracking_uri=uri, out_dir=tmp_path)
+
+
+# The methods at 3x: two parameter-free kernels (0 GFLOPs counted) and two networks, each run timed by a process of
+# its own on the training machine; seeds: 3 for SWT-db4 (drawn intervals), 2 for DFASR (none), 1 for the kernels.
+COST_ROWS = {  # variant: (ms/frame, GFLOPs, PSNR per seed)
+    "bicubic": (0.5, 0.0, (24.0,)),
+    "joint_bilateral": (3.0, 0.0, (26.0,)),
+    "swt_db4": (450.0, 4.2, (29.5, 29.9, 29.7)),
+    "dfasr": (800.0, 9.8, (28.0, 28.6)),
+}
+OWN_DEVICE = {"bench/device": "cpu: Test CPU (2 threads)", "bench/resolution": "960x540 output, 2x"}
+RUNTIME_DEVICE = {"bench/device": "cuda: NVIDIA H100", "bench/resolution": "1920x1080 output, 2x"}
+
+
+@pytest.fixture(scope="module")
+def timed(tmp_path_factory):
+    """A methods sweep whose runs timed themselves, and a runtime sweep that timed three of its rows in one process."""
+    root = tmp_path_factory.mktemp("timed")
+    jobs, tags = [], []
+    for variant, (ms, gflops, psnrs) in COST_ROWS.items():
+        for seed, psnr in enumerate(psnrs):
+            metrics = {"test/psnr_3x": psnr, "bench/ms_per_frame": ms + seed, "bench/gflops": gflops}
+            jobs.append(({"variant": variant, "seed": str(seed)}, metrics, "FINISHED"))
+            tags.append({**OWN_DEVICE, "bench/process": f"trainer:{len(jobs)}:x"})
+    uri = fake_sweep(root, "methods", jobs, tags, old=False)
+    timings = {"bicubic": (0.2, 0.0), "swt_db4": (5.0, 4.2), "dfasr": (9.0, 9.8)}  # joint_bilateral not timed
+    runtime = [
+        ({"variant": v, "model": "paper"}, {"bench/ms_per_frame": ms, "bench/gflops": g}, "FINISHED")
+        for v, (ms, g) in timings.items()
+    ]
+    fake_sweep(root, "runtime", runtime, [{**RUNTIME_DEVICE, "bench/process": "gpu:7:y"}] * 3, old=False)
+    return root, uri
+
+
+def _summary(uri, sweep):
+    from mlflow import MlflowClient
+
+    from wdss.report import collect, find_parent, group, summarise
+
+    client = MlflowClient(uri)
+    groups = group(collect(client, find_parent(client, sweep).info.run_id))
+    return client, groups, summarise(groups)[0]
+
+
+def test_runtime_from_runs_that_timed_themselves_says_so_and_names_device_and_size(timed):
+    from wdss.report import costs, tradeoff_plot
+
+    root, uri = timed
+    text = (report("methods", tracking_uri=uri, out_dir=root / "own") / "table.md").read_text()
+    assert "ms/frame from each run's own timing: 7 different processes timed these rows" in text
+    assert "--runtime runtime" in text  # how to get a fair comparison
+    _, groups, metrics = _summary(uri, "methods")
+    cost = costs(groups, metrics)
+    assert cost.ms_label == "ms / frame (cpu: Test CPU (2 threads); 960x540 output, 2x)"
+    figure = tradeoff_plot(list(groups), metrics, root / "own.png", "3x", cost)
+    assert figure.axes[0].get_xlabel() == cost.ms_label and "different processes" in figure.texts[0].get_text()
+
+
+def test_runtime_from_a_runtime_sweep_is_one_process_timing_every_row(timed):
+    from wdss.report import costs, runtime_runs, tradeoff_plot
+
+    root, uri = timed
+    text = (report("methods", tracking_uri=uri, out_dir=root / "swept", runtime="runtime") / "table.md").read_text()
+    one = "ms/frame from the runtime sweep runtime, matched to the rows by configuration name: one process timed "
+    assert one + "every row (cuda: NVIDIA H100)." in text
+    assert "No configuration of runtime matches Joint bilateral: left out of both panels." in text
+    client, groups, metrics = _summary(uri, "methods")
+    cost = costs(groups, metrics, runtime_runs(client, "runtime"), "runtime")
+    assert {row: cell[0] for row, cell in cost.ms.items()} == {"Bicubic": 0.2, "SWT-db4": 5.0, "DFASR": 9.0}
+    assert cost.ms_label == "ms / frame (cuda: NVIDIA H100; 1920x1080 output, 2x)"
+    figure = tradeoff_plot(list(groups), metrics, root / "swept.png", "3x", cost)
+    [psnr_ms] = [ax for ax in figure.axes if ax.get_xlabel() == cost.ms_label and "PSNR" in ax.get_ylabel()]
+    assert sorted(x for c in psnr_ms.containers for x in c.lines[0].get_xdata()) == [0.2, 5.0, 9.0]
+    with pytest.raises(SystemExit, match="no sweep named 'nope'"):
+        runtime_runs(client, "nope")
+    header, rows = body((report("runtime", tracking_uri=uri, out_dir=root / "runtime") / "table.md").read_text())
+    assert header == ["Configuration", "ms/frame ↓", "GFLOPs ↓", "n"]  # the runtime sweep's own table
+    assert rows["Bicubic"][1] == "not counted" and rows["SWT-db4"][1] == "**4.2 ± n/a**"  # 0 is no best
+
+
+def test_uncounted_flops_are_left_out_and_named_intervals_need_three_values_costs_over_decades_are_log(timed):
+    from wdss.report import costs, tradeoff_plot
+
+    root, uri = timed
+    _, groups, metrics = _summary(uri, "methods")
+    cost = costs(groups, metrics)
+    assert set(cost.gflops) == {"SWT-db4", "DFASR"} and set(cost.ms) == set(groups)
+    assert any(note.startswith("FLOPs not counted for Bicubic; Joint bilateral (0 GFLOPs") for note in cost.notes)
+    figure = tradeoff_plot(list(groups), metrics, root / "flops.png", "3x", cost)
+    by_label = {(ax.get_xlabel().split(" (")[0], ax.get_ylabel().split(" @")[0]): ax for ax in figure.axes[:5]}
+    psnr_ms, psnr_flops = by_label["ms / frame", "PSNR (dB)"], by_label["GFLOPs / frame", "PSNR (dB)"]
+    assert [c.get_label() for c in psnr_flops.containers] == ["SWT-db4", "DFASR"]  # no 0-GFLOPs point on the axis
+    drawn = {c.get_label(): c.has_yerr for c in psnr_ms.containers}
+    assert drawn == {"Bicubic": False, "Joint bilateral": False, "SWT-db4": True, "DFASR": False}  # n = 1, 1, 3, 2
+    assert psnr_ms.get_xscale() == "log" and psnr_flops.get_xscale() == "linear"  # 0.5-800 ms; 4.2-9.8 GFLOPs
+
+
+def test_frames_plot_lines_of_equal_values_stay_apart(tmp_path):
+    from wdss.report import frames_plot
+
+    jobs = [({"variant": v, "seed": "0"}, {"test/psnr_3x": 28.0}, "FINISHED") for v in ("bicubic", "dfasr", "nsrr")]
+    uri = fake_sweep(tmp_path, "methods", jobs)
+    client, groups, _ = _summary(uri, "methods")
+    for runs in groups.values():
+        for frame in range(1, 6):  # every row the same values: one line would hide the others
+            client.log_metric(runs[0].info.run_id, "frames/test_000/psnr_3x", 28 + frame / 10, step=frame)
+    _, groups, _ = _summary(uri, "methods")
+    figure = frames_plot(client, groups, tmp_path / "frames.png", "3x")
+    lines = [line for line in figure.axes[0].get_lines() if line.get_label() in groups]
+    assert len(lines) == 3
+    assert len({(line.get_marker(), line.get_linestyle()) for line in lines}) == 3
+    assert len({tuple(line.get_xdata()) for line in lines}) == 3  # shifted sideways, a fraction of a frame
+    assert all(abs(x - round(x)) <= 0.15 + 1e-9 for line in lines for x in line.get_xdata())

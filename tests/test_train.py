@@ -223,7 +223,22 @@ def test_smoke_training_end_to_end_in_process(tmp_path, tracking):
     }
     artifacts = {a.path for a in tracking.list_artifacts(run.info.run_id)}
     assert {"config.yaml", "images", "test"} <= artifacts
-    assert "time/train_s" in run.data.metrics and run.data.params["model.net.head"] == "shared_inr"
+    assert "time/train_s" in run.data.metrics
+    # Named variant first; the overrides a report reads are a tag; a score of params, none an absolute path.
+    assert run.info.run_name == "swt_db4 · smoke · flip=true · seed0 · rendered"
+    assert run.data.tags["overrides"] == "experiment=smoke,model.flip=true,variant=swt_db4"
+    assert run.data.tags["data_root"] == "tests/fixtures/rendered"
+    params = run.data.params
+    assert 15 <= len(params) <= 30, sorted(params)
+    assert params["head"] == "shared_inr" and params["variant"] == "swt_db4" and params["seed"] == "0"
+    assert params["data.root"] == "tests/fixtures/rendered" and params["model.flip"] == "True"
+    assert {"model.optimizer.lr", "trainer.max_epochs", "data.batch_size", "data.patch_size", "scale.train"} <= set(
+        params
+    )
+    assert not [k for k, v in params.items() if str(tmp_path) in v or v.startswith("/")], params
+    assert not any(k.startswith(("net/", "optimizer/", "size.", "paths.")) for k in params)  # no autologged copies
+    assert (tmp_path / "run" / "run_name").read_text() == run.info.run_name
+    assert (tmp_path / "run" / "run_key").read_text() == run.data.tags["overrides"]
 
 
 def test_resume_from_last_continues_the_same_run(tmp_path, tracking):
@@ -267,14 +282,17 @@ def test_runs_started_in_the_same_second_get_folders_of_their_own(monkeypatch):
         assert len(folders) == 2 and all("2025-01-02_03-04-05_" in folder for folder in folders), folders
 
 
-def fake_run(log_dir: Path, folder: str, name: str, started: float, checkpointed: float) -> Path:
-    """A run folder as wdss.train leaves it: its name and MLflow id (written at the start) and a last.ckpt."""
+def fake_run(log_dir: Path, folder: str, key: str, started: float, checkpointed: float, old=False) -> Path:
+    """A run folder as wdss.train leaves it: its configuration's key, name and MLflow id (written at the start) and
+    a last.ckpt; ``old``: as folders were before names led with the variant (the key in ``run_name``)."""
     run_dir = log_dir / "runs" / folder
     (run_dir / "checkpoints").mkdir(parents=True)
-    (run_dir / "run_name").write_text(name)
+    (run_dir / "run_name").write_text(key if old else "swt_db4 · smoke · seed0 · rendered")
+    if not old:
+        (run_dir / "run_key").write_text(key)
     (run_dir / "mlflow_run_id").write_text(f"id-{folder}")
     (run_dir / "checkpoints" / "last.ckpt").write_bytes(b"")
-    os.utime(run_dir / "run_name", (started, started))
+    os.utime(run_dir / ("run_name" if old else "run_key"), (started, started))
     os.utime(run_dir / "checkpoints" / "last.ckpt", (checkpointed, checkpointed))
     return run_dir / "checkpoints" / "last.ckpt"
 
@@ -283,13 +301,14 @@ def test_ckpt_path_last_refuses_runs_of_one_name_that_trained_at_the_same_time(t
     from wdss.train import _resume
 
     cfg = compose_train(["experiment=smoke", "ckpt_path=last"], tmp_path)
-    name = "experiment=smoke"
-    earlier = fake_run(tmp_path, "a", name, started=1000, checkpointed=1100)
-    later = fake_run(tmp_path, "b", name, started=2000, checkpointed=2100)
+    key = "experiment=smoke"
+    earlier = fake_run(tmp_path, "a", key, started=1000, checkpointed=1100, old=True)  # before run_key existed
+    later = fake_run(tmp_path, "b", key, started=2000, checkpointed=2100)
     fake_run(tmp_path, "c", "experiment=smoke,seed=1", started=3000, checkpointed=3100)  # another configuration
+    fake_run(tmp_path, "d", "experiment=smoke,seed=1", started=3000, checkpointed=3100, old=True)
     assert _resume(cfg) == (str(later), "id-b")  # one after the other: the newest is the one started last
     os.utime(earlier, (2050, 2050))  # a still checkpointed after b started: both trained at once
-    with pytest.raises(ConfigError, match="ckpt_path=last is ambiguous: 2 runs named 'experiment=smoke'") as err:
+    with pytest.raises(ConfigError, match="ckpt_path=last is ambiguous: 2 runs of 'experiment=smoke'") as err:
         _resume(cfg)
     assert f"{later} (MLflow run id-b)" in str(err.value) and f"{earlier} (MLflow run id-a)" in str(err.value)
 
@@ -372,6 +391,12 @@ def test_a_tiny_sweep_nests_its_runs_survives_a_failing_job_and_reports(tmp_path
     assert sorted(r.info.status for r in children) == ["FAILED", "FINISHED", "FINISHED", "FINISHED"]
     parent = client.get_run(parents[0].info.run_id)
     assert parent.info.status == "FINISHED" and parent.data.tags["failed_jobs"] == "1"
+    assert parent.data.tags["data_root"] == "tests/fixtures/rendered"
+    assert {r.info.run_name for r in children} == {  # variant first, then the sweep's other axis, seed, data
+        f"{variant} · smoke · patch_size={size} · flip=True · seed0 · rendered"
+        for variant in ("swt_haar", "bilinear_demodulated")
+        for size in (24, 1000)
+    }
     assert {a.path for a in client.list_artifacts(parents[0].info.run_id, "report")} >= {
         "report/table.md",
         "report/table.csv",
@@ -400,6 +425,20 @@ def test_eval_rebuilds_from_the_checkpoint_and_logs_under_the_training_run(tmp_p
     )
     assert evaluation.info.status == "FINISHED" and "test/psnr_2.5x" in evaluation.data.metrics
     assert evaluation.data.tags["ckpt_path"] == str(ckpt.resolve())
+    assert (
+        evaluation.data.tags["overrides"]
+        == trained.data.tags["overrides"]
+        == "experiment=smoke,test=false,variant=dwt_haar"
+    )
+    assert evaluation.data.params == {
+        "ckpt": "last.ckpt",
+        "data.root": "tests/fixtures/rendered",
+        "data.test_scales": "[2.0, 2.5]",
+        "model.tonemap_name": "hable",
+        "tonemap_exposure": "None",
+    }  # what the evaluation chose, not the module's hyper-parameters again
+    assert evaluation.data.tags["bench/resolution"] == "96x48 output, 2x"  # the report's runtime axis
+    assert evaluation.data.tags["bench/device"].startswith("cpu: ") and evaluation.data.tags["bench/process"]
     assert tracking.get_run(trained.info.run_id).info == trained.info  # status and end time as training left them
     frames = sorted(p.name for p in (tmp_path / "eval" / "run" / "frames").iterdir())
     assert "fixture_000_0001_2.5x.exr" in frames and "fixture_000_0001_2.5x.png" in frames

@@ -9,7 +9,7 @@ not the job's folder; and a job that a launcher runs (joblib, submitit) has the 
 :func:`rank_command` starts the same job instead, composed from what Hydra recorded of it: its config sources and
 name, the Hydra overrides and the job's own task overrides (one value of each swept key), as a single run
 (``hydra.mode=RUN``) in the job's folder, writing no second ``.hydra`` (``hydra.output_subdir=null``) and logging
-to a file of its own. The task overrides make the rank's ``run_name`` the job's, so ``ckpt_path=last`` finds the
+to a file of its own. The task overrides make the rank's ``run_key`` the job's, so ``ckpt_path=last`` finds the
 same checkpoint on every rank (the job's new folder has none before all ranks have met). :func:`use_rank_command`
 makes Lightning use it. Under SLURM, SLURM starts every rank itself (one task per GPU) and none of this runs.
 """

@@ -96,7 +96,8 @@ def _eval_logger(cfg: DictConfig, ckpt: Path) -> Any:
             tags["mlflow.parentRunId"] = training
             # What was trained (variant, model, seed, ...), so that a report groups evaluations as their trainings.
             tags.update({k: v for k, v in run.data.tags.items() if k in (*GROUPS, "seed") and k != "data"})
-            tags["overrides"] = run.data.tags.get("overrides") or run.info.run_name or ""
+            # (runs from before the tag existed were named by their overrides)
+            tags["overrides"] = run.data.tags.get("overrides", run.info.run_name or "")
             experiment_name = client.get_experiment(run.info.experiment_id).name  # the UI nests within one
     ensure_experiment(client, experiment_name)
     return instantiate(
@@ -105,6 +106,22 @@ def _eval_logger(cfg: DictConfig, ckpt: Path) -> Any:
         run_name=f"eval {ckpt.name} · {tags.get('data_root', '')}",
         tags=tags,
     )
+
+
+def _eval_params(cfg: DictConfig, ckpt: Path, module: SuperResolutionModule) -> dict[str, str]:
+    """What an evaluation chose: the checkpoint's name, the data (root relative to the project), the test scales
+    and the metrics' tone map (the report's metric path); no absolute path."""
+    data = data_tags(cfg)
+    params = {
+        "ckpt": ckpt.name,
+        "data.root": data.get("data_root", ""),
+        "data.test_scales": str(OmegaConf.to_container(cfg.data.test_scales, resolve=True)),
+        "model.tonemap_name": str(module.hparams.get("tonemap_name", "hable")),
+        "tonemap_exposure": str(module.hparams.get("tonemap_exposure")),
+    }
+    if "train_data_root" in data:
+        params["data.root"], params["data.test_root"] = data["train_data_root"], data["data_root"]
+    return {k: v if not Path(v).is_absolute() else Path(v).name for k, v in params.items()}
 
 
 def _command_line_keys() -> set[str]:
@@ -143,7 +160,11 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
         from wdss.video import SequenceVideos
 
         callbacks.append(SequenceVideos(Path(str(cfg.paths.output_dir)) / "videos"))
-    trainer = instantiate(cfg.trainer, logger=logger, callbacks=callbacks, enable_checkpointing=False)
+    # The module's hyper-parameters are its training run's params; this run logs what the evaluation chose.
+    trainer = instantiate(
+        cfg.trainer, logger=logger, callbacks=callbacks, enable_checkpointing=False, enable_autolog_hparams=False
+    )
+    logger.log_hyperparams(_eval_params(cfg, ckpt, module))
     from wdss.train import _bench, log_noise_ceilings
 
     try:

@@ -16,10 +16,14 @@ artifacts of the parent run:
   each claimed pair, paired by seed, with its 95% t-interval);
 * ``table.csv``: every metric at every scale and their average over scales, as mean, 95% half-width and n;
 * ``tradeoff.png``: PSNR and FLIP against ms/frame and against GFLOPs, the Pareto front marked, with the
-  training wall-clock per configuration beside it;
+  training wall-clock per configuration beside it; log-x where the costs span decades, intervals only for n >= 3.
+  The costs are the runs' own or, with ``--runtime runtime``, those of the runtime sweep (:file:`sweeps/runtime.yaml`:
+  one process times every configuration); the axes name the device and the size, and the caption (also below the
+  table) says how many processes timed the rows and which rows have no counted FLOPs (left out of that panel);
 * ``qualitative.png``: the same crop of the first three test frames from every configuration and the target;
 * ``frames.png``: PSNR against frame index over the first test sequence, a line per configuration (the mean over
-  its seeds), so that the drift of recurrent models shows.
+  its seeds; each its own marker and dash, shifted sideways by a fraction of a frame), so that the drift of
+  recurrent models shows.
 """
 
 from __future__ import annotations
@@ -29,11 +33,11 @@ import csv
 import io
 import math
 import os
-import re
 import statistics
 import tempfile
 from collections import Counter, defaultdict
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 __all__ = ["collect", "find_runs", "main", "report"]
@@ -89,9 +93,6 @@ PAPER_ORDERINGS = {
     ),
     "methods": (("bicubic", "<", "real_esrgan"), ("real_esrgan", "<", "dfasr"), ("dfasr", "<", "swt_db4")),
 }
-# Hydra's override_dirname joins ``key=value`` items with commas and does not escape list values ("[2.0,3.0]"):
-# an item starts only where a key and "=" follow the comma.
-_ITEM = re.compile(r",(?=[+~]*[\w.@/-]+=)")
 
 
 def _client(uri: str | None):
@@ -113,13 +114,22 @@ def find_parent(client, sweep: str | None = None, parent: str | None = None):
 
 
 def overrides(run) -> dict[str, str]:
-    """A job's Hydra overrides, read back from its run name (the job's ``override_dirname``); {} for a custom name."""
-    # An evaluation carries its training run's overrides (tag ``overrides``, wdss.eval): it is a row of that training.
-    name = run.data.tags.get("overrides") or run.data.tags.get("mlflow.runName", "")
-    items = [item.split("=", 1) for item in _ITEM.split(name)] if name else []
-    if not items or any(len(item) != 2 for item in items):
+    """A job's Hydra overrides: its tag ``overrides`` (``wdss.tracking.run_overrides``; an evaluation carries its
+    training run's, so it is a row of that training), or for runs from before the tag, their name (then the job's
+    ``override_dirname``); {} for a custom name or one that leads with the variant (``swt_db4 · seed0 · mini``)."""
+    from wdss.tracking import NAME_SEPARATOR, split_overrides
+
+    tags = run.data.tags
+    if "overrides" in tags:
+        text = tags["overrides"]
+    else:
+        text = tags.get("mlflow.runName", "")
+        if NAME_SEPARATOR in text:
+            return {}
+    items = split_overrides(text)
+    if any(value is None for _, value in items):
         return {}
-    return {key.lstrip("+~"): value for key, value in items}
+    return dict(items)
 
 
 def sweep_axes(runs: Sequence) -> list[str]:
@@ -164,6 +174,20 @@ def group(runs: Sequence) -> dict[str, list]:
     if several:  # the rows of one data root together
         return dict(sorted(groups.items(), key=lambda item: _tags(item[1][0]).get("data_root", "")))
     return dict(groups)
+
+
+def runtime_runs(client, runtime: str) -> list:
+    """The jobs of a runtime sweep, by sweep name or parent run id."""
+    from mlflow.exceptions import MlflowException
+
+    try:
+        parent = client.get_run(runtime)
+    except MlflowException:
+        parent = find_parent(client, sweep=runtime)
+    jobs = collect(client, parent.info.run_id)
+    if not any("bench/ms_per_frame" in run.data.metrics for run in jobs):
+        raise SystemExit(f"wdss.report: the runtime sweep {runtime!r} ({parent.info.run_id}) has no timed job")
+    return jobs
 
 
 def collect(client, parent_id: str) -> list:
@@ -343,6 +367,8 @@ def compact_table(
                 cells[row].append(f"n/a (only {'/'.join(row_scales)})")  # not comparable with the full mean
             elif n == 0 or not math.isfinite(mean):
                 cells[row].append("missing")
+            elif key == "bench/gflops" and mean <= 0:  # torch's counter saw no matrix product or convolution
+                cells[row].append("not counted")
             else:
                 half_text = _fixed(half, decimals) if n > 1 and math.isfinite(half) else "n/a"
                 cells[row].append(f"{mean:.{decimals}f} ± {half_text}")
@@ -509,32 +535,159 @@ def pareto(points: list[tuple[float, float]], higher_is_better: bool) -> list[in
     return front
 
 
-def tradeoff_plot(rows, metrics, path: Path, scale: str) -> None:
+Cell = tuple[float, float, int]  # mean, 95% half-width, n
+# Each row of a plot its own marker (and in frames.png its own dash and a small sideways offset): rows of equal
+# values stay visible.
+MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*", "<", ">", "h", "p")
+DASHES = ("-", "--", "-.", ":")
+FRAME_SPREAD = 0.3  # the offsets span this much of a frame
+
+
+@dataclass
+class Costs:
+    """The cost axes of the trade-off plot, per row, and what the caption says about where they come from."""
+
+    ms: dict[str, Cell]
+    gflops: dict[str, Cell]
+    ms_label: str = "ms / frame"
+    gflops_label: str = "GFLOPs / frame"
+    notes: list[str] = field(default_factory=list)
+
+
+def _bench_setting(run) -> tuple[str, str, str]:
+    """Where a run's ``bench/*`` were measured: device, output size and scale, and the process that timed them
+    (runs from before the tags: the process by host and pid, the size from the params)."""
+    tags, params = run.data.tags, run.data.params
+    resolution = tags.get("bench/resolution")
+    if resolution is None and "bench.width" in params:
+        resolution = f"{params['bench.width']}x{params['bench.height']} output, {float(params['bench.scale']):g}x"
+    process = tags.get("bench/process") or (f"{tags['host']}:{tags['pid']}" if "pid" in tags else run.info.run_id)
+    return tags.get("bench/device", "device not recorded"), resolution or "size not recorded", process
+
+
+def _axis_words(settings: set[str], what: str) -> str:
+    return next(iter(settings)) if len(settings) == 1 else f"{len(settings)} {what} (see caption)"
+
+
+def costs(groups: dict[str, list], metrics, runtime: Sequence = (), runtime_name: str = "") -> Costs:
+    """The trade-off plot's ms/frame and GFLOPs per row: the rows' own ``bench/*``, or with ``runtime`` (the jobs of
+    a runtime sweep, :file:`sweeps/runtime.yaml`) that sweep's, matched by configuration name (variant or model).
+
+    Timings compare only when one process took them (the runtime sweep runs its jobs one after another): the caption
+    says how many processes did, on which device and at which size. Rows whose FLOPs were not counted (0 GFLOPs:
+    torch's counter sees matrix products and convolutions, not the per-pixel arithmetic of parameter-free kernels)
+    are left out of the FLOPs panel and named.
+    """
+    notes = []
+    if runtime:
+        by_label: dict[str, list] = defaultdict(list)
+        for run in runtime:
+            if run.info.status == "FINISHED" and "bench/ms_per_frame" in run.data.metrics:
+                by_label[base_label(_tags(run))[0]].append(run)
+        sources = {row: by_label.get(base_label(_tags(runs[0]))[0], []) for row, runs in groups.items()}
+        missing = [row for row, jobs in sources.items() if not jobs]
+        sources = {row: jobs for row, jobs in sources.items() if jobs}
+        cells = {
+            key: {row: (*interval([j.data.metrics[key] for j in jobs]), len(jobs)) for row, jobs in sources.items()}
+            for key in ("bench/ms_per_frame", "bench/gflops")
+        }
+        ms, gflops = cells["bench/ms_per_frame"], cells["bench/gflops"]
+        timed = [run for jobs in sources.values() for run in jobs]
+        origin = f"the runtime sweep {runtime_name}, matched to the rows by configuration name"
+        if missing:
+            notes.append(f"No configuration of {runtime_name} matches {'; '.join(missing)}: left out of both panels.")
+    else:
+        ms = {row: m["bench/ms_per_frame"] for row, m in metrics.items() if "bench/ms_per_frame" in m}
+        gflops = {row: m["bench/gflops"] for row, m in metrics.items() if "bench/gflops" in m}
+        timed = [r for runs in groups.values() for r in runs if "bench/ms_per_frame" in r.data.metrics]
+        timed = [r for r in timed if r.info.status == "FINISHED"]
+        origin = "each run's own timing"
+    settings = [_bench_setting(run) for run in timed]
+    devices, sizes, processes = ({setting[i] for setting in settings} for i in range(3))
+    if timed and len(processes) == 1:
+        notes.insert(0, f"ms/frame from {origin}: one process timed every row ({next(iter(devices))}).")
+    elif timed:
+        hint = "" if runtime else " (python -m wdss.train -cd sweeps -cn runtime, then --runtime runtime)"
+        notes.insert(
+            0,
+            f"ms/frame from {origin}: {len(processes)} different processes timed these rows, each at its own moment "
+            f"under its own load: differences between rows may be the machine's, not the models'; for a fair "
+            f"comparison time every row in one process{hint}.",
+        )
+    if len(devices) > 1 or len(sizes) > 1:
+        notes.append(f"Timed on {' / '.join(sorted(devices))}; at {' / '.join(sorted(sizes))}.")
+    uncounted = [row for row, cell in gflops.items() if math.isfinite(cell[0]) and cell[0] <= 0]
+    if uncounted:
+        notes.append(
+            f"FLOPs not counted for {'; '.join(uncounted)} (0 GFLOPs: torch's FLOP counter counts matrix products "
+            "and convolutions, not the per-pixel arithmetic of parameter-free kernels): left out of the FLOPs panel."
+        )
+    device, size = _axis_words(devices, "devices"), _axis_words(sizes, "sizes")
+    return Costs(
+        ms=ms,
+        gflops={row: cell for row, cell in gflops.items() if row not in uncounted},
+        ms_label=f"ms / frame ({device}; {size})" if timed else "ms / frame",
+        gflops_label=f"GFLOPs / frame ({size})" if timed else "GFLOPs / frame",
+        notes=notes,
+    )
+
+
+def _decades(values: Sequence[float]) -> bool:
+    """Values that span a factor of ten or more: a linear axis would crush the small ones together."""
+    positive = [v for v in values if math.isfinite(v) and v > 0]
+    return len(positive) > 1 and max(positive) / min(positive) >= 10
+
+
+MIN_N_FOR_INTERVAL = 3  # two seeds give a t-interval 12.7 standard errors wide: drawn, it says nothing
+
+
+def _error(cell: Cell) -> float:
+    """The half-width drawn for a cell: none below ``MIN_N_FOR_INTERVAL`` values."""
+    return cell[1] if cell[2] >= MIN_N_FOR_INTERVAL and math.isfinite(cell[1]) else 0.0
+
+
+def tradeoff_plot(rows, metrics, path: Path, scale: str, cost: Costs | None = None):
+    """PSNR and FLIP against ms/frame and GFLOPs (log-x where the costs span decades), the Pareto front marked,
+    intervals only for n >= 3, the training wall-clock beside; the caption says where the costs come from. Returns
+    the (closed) figure."""
+    import textwrap
+
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
-    panels = [("bench/ms_per_frame", "ms / frame"), ("bench/gflops", "GFLOPs")]
+    cost = cost or costs({row: [] for row in rows}, metrics)
+    # A row keeps its colour and marker in every panel, named once in the legend (labels beside close points
+    # would overlap).
+    styles = {row: (f"C{i % 10}", MARKERS[i % len(MARKERS)]) for i, row in enumerate(rows)}
+    panels = [(cost.ms, cost.ms_label), (cost.gflops, cost.gflops_label)]
     qualities = [(f"test/psnr_{scale}", "PSNR (dB)", True), (f"test/flip_{scale}", "FLIP", False)]
-    fig, axes = plt.subplots(2, 3, figsize=(15, 8))
+    caption = "\n".join(textwrap.fill(note, 190) for note in cost.notes)
+    lines = caption.count("\n") + 1 if caption else 0
+    fig, axes = plt.subplots(2, 3, figsize=(15, 8 + 0.16 * lines))
     for r, (quality, qlabel, higher) in enumerate(qualities):
-        for c, (cost, clabel) in enumerate(panels):
+        for c, (values, clabel) in enumerate(panels):
             ax = axes[r, c]
             points, labels = [], []
             for row in rows:
                 m = metrics[row]
-                if cost in m and quality in m and math.isfinite(m[cost][0]) and math.isfinite(m[quality][0]):
-                    points.append((m[cost][0], m[quality][0]))
+                if row in values and quality in m and math.isfinite(values[row][0]) and math.isfinite(m[quality][0]):
+                    x, y = values[row][0], m[quality][0]
+                    points.append((x, y))
                     labels.append(row)
-                    error = m[quality][1] if math.isfinite(m[quality][1]) else 0.0  # one seed: no interval
-                    ax.errorbar(m[cost][0], m[quality][0], yerr=error, fmt="o", capsize=3)
-                    ax.annotate(row, (m[cost][0], m[quality][0]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+                    colour, marker = styles[row]
+                    ax.errorbar(x, y, yerr=_error(m[quality]) or None, fmt=marker, capsize=3, color=colour, label=row)
             if not points:
                 ax.text(
                     0.5,
                     0.5,
-                    f"no {qlabel} logged in these runs",
+                    f"no {clabel} logged in these runs"
+                    if not values
+                    else f"no {qlabel} logged in these runs"
+                    if not any(quality in metrics[row] for row in rows)
+                    else f"no row has both {qlabel} and {clabel.split(' (')[0]}",
                     ha="center",
                     va="center",
                     transform=ax.transAxes,
@@ -542,23 +695,36 @@ def tradeoff_plot(rows, metrics, path: Path, scale: str) -> None:
                 )
             front = sorted((points[i] for i in pareto(points, higher)), key=lambda p: p[0])
             if front:
-                ax.plot(*zip(*front, strict=True), "--", color="gray", label="Pareto front")
-                ax.legend(fontsize=7)
-            ax.set_xlabel(clabel)
+                ax.plot(*zip(*front, strict=True), "--", color="gray", label="Pareto front", zorder=0)
+            if _decades([x for x, _ in points]):
+                ax.set_xscale("log")
+            ax.set_xlabel(clabel, fontsize=8)
             ax.set_ylabel(f"{qlabel} @ {scale}")
-            ax.grid(alpha=0.3)
+            ax.grid(alpha=0.3, which="both")
         ax = axes[r, 2]
         if r == 0:
-            times = [metrics[row].get("time/train_s", (float("nan"), 0, 0)) for row in rows]
+            times = [metrics[row].get("time/train_s", (float("nan"), float("nan"), 0)) for row in rows]
             means = [t[0] / 60 if math.isfinite(t[0]) else 0.0 for t in times]
-            errors = [min(t[1] / 60, m) if math.isfinite(t[1]) else 0.0 for t, m in zip(times, means, strict=True)]
-            ax.barh(rows, means, xerr=errors)
+            errors = [min(_error(t) / 60, m) for t, m in zip(times, means, strict=True)]
+            ax.barh(rows, means, xerr=errors, color=[f"C{i % 10}" for i in range(len(rows))])
             ax.set_xlabel("training wall-clock (min), mean over seeds")
+            if not any(means):
+                ax.set_xticks([])
+                ax.text(0.5, 0.5, "no training time logged", ha="center", transform=ax.transAxes)
         else:
             ax.axis("off")
-    fig.tight_layout()
+            handles = [
+                Line2D([], [], color=colour, marker=marker, linestyle="none", label=row)
+                for row, (colour, marker) in styles.items()
+            ]
+            handles.append(Line2D([], [], color="gray", linestyle="--", label="Pareto front"))
+            ax.legend(handles=handles, loc="upper left", fontsize=8, frameon=False)
+    if caption:
+        fig.text(0.01, 0.005, caption, fontsize=7.5, va="bottom", ha="left")
+    fig.tight_layout(rect=(0, 0.02 + 0.16 * lines / fig.get_figheight(), 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return fig
 
 
 def qualitative_figure(client, groups: dict[str, list], path: Path, scale: str) -> bool:
@@ -617,9 +783,11 @@ def qualitative_figure(client, groups: dict[str, list], path: Path, scale: str) 
     return True
 
 
-def frames_plot(client, groups: dict[str, list], path: Path, scale: str) -> bool:
+def frames_plot(client, groups: dict[str, list], path: Path, scale: str):
     """PSNR against frame index over the first test sequence (by name), a line per row: the mean over its
-    finished runs of the ``frames/<sequence>/psnr_<scale>`` histories that the test logs."""
+    finished runs of the ``frames/<sequence>/psnr_<scale>`` histories that the test logs. Each line has its own
+    marker (hollow) and dash and is shifted sideways by a fraction of a frame, so that no line hides another.
+    Returns the (closed) figure, or None without per-frame metrics."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -634,9 +802,9 @@ def frames_plot(client, groups: dict[str, list], path: Path, scale: str) -> bool
         if key.startswith("frames/") and key.endswith(suffix)
     )
     if not keys:
-        return False
+        return None
     key = keys[0]
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    curves = {}
     for row, runs in groups.items():
         by_frame: dict[int, list[float]] = defaultdict(list)
         for run in runs:
@@ -644,10 +812,25 @@ def frames_plot(client, groups: dict[str, list], path: Path, scale: str) -> bool
                 for metric in client.get_metric_history(run.info.run_id, key):
                     by_frame[metric.step].append(metric.value)
         if by_frame:
-            frames = sorted(by_frame)
-            ax.plot(frames, [statistics.fmean(by_frame[f]) for f in frames], marker=".", label=row)
+            curves[row] = {frame: statistics.fmean(values) for frame, values in sorted(by_frame.items())}
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    count = len(curves)
+    for i, (row, curve) in enumerate(curves.items()):
+        shift = (i - (count - 1) / 2) * FRAME_SPREAD / max(count - 1, 1)
+        ax.plot(
+            [frame + shift for frame in curve],
+            list(curve.values()),
+            marker=MARKERS[i % len(MARKERS)],
+            linestyle=DASHES[(i // len(MARKERS) + i) % len(DASHES)],
+            markerfacecolor="none",
+            markersize=5,
+            linewidth=1.2,
+            label=row,
+        )
     ax.xaxis.get_major_locator().set_params(integer=True)
-    ax.set_xlabel("frame")
+    ax.set_xlabel(
+        "frame" + (f" (lines shifted by up to ±{FRAME_SPREAD / 2:g} frame to stay apart)" if count > 1 else "")
+    )
     ax.set_ylabel(f"PSNR (dB) @ {scale}")
     ax.set_title(f"per-frame PSNR, test sequence {key.split('/')[1]}", fontsize=9)
     ax.grid(alpha=0.3)
@@ -655,7 +838,7 @@ def frames_plot(client, groups: dict[str, list], path: Path, scale: str) -> bool
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return True
+    return fig
 
 
 def report(
@@ -669,12 +852,14 @@ def report(
     tracking_uri: str | None = None,
     out_dir: str | Path = "outputs/reports",
     scale: str | None = None,
+    runtime: str | None = None,
 ) -> Path:
     """Write the table, trade-off plot and qualitative figure of a sweep (``sweep`` or ``parent``; logged on the
     parent run too) or of any runs (``runs`` by id, or ``experiment`` with an MLflow ``filter_string``).
 
     ``scale``: the table's and the plots' scale (``3x``, or ``avg`` over the tested scales); by default the
-    sweep's only test scale, else its paper table's (``PAPER_SCALES``).
+    sweep's only test scale, else its paper table's (``PAPER_SCALES``). ``runtime``: a runtime sweep (its name or
+    parent run id) whose ms/frame and GFLOPs, all timed by one process, the trade-off plot shows for each row.
     """
     client = _client(tracking_uri)
     if runs or experiment:
@@ -692,6 +877,8 @@ def report(
     groups = group(runs)
     rows = list(groups)
     metrics, notes = summarise(groups)
+    timing = runtime_runs(client, runtime) if runtime else []
+    cost = costs(groups, metrics, timing, runtime or "")
     scales = test_scales(metrics)
     shown = table_scale(name, scales, scale)
     columns = compact_columns(metrics, shown, scales)
@@ -708,6 +895,7 @@ def report(
         + orderings(name, groups, shown, scales)
         + (TEMPORAL_NOTE if any("twe_ratio" in key or "tpsnr" in key for key, *_ in columns) else "")
         + (noise_ceiling_note(runs) if scales else "")
+        + ("\nCosts (tradeoff.png): " + " ".join(cost.notes) + "\n" if cost.notes else "")
         + f"\nMetrics on tone-mapped output: {metric_path(runs)}. {len(runs)} runs ({counts}); "
         + (f"parent run {parent_run.info.run_id}; " if parent_run is not None else "")
         + "every metric at every scale in table.csv.\n"
@@ -717,7 +905,7 @@ def report(
     (out / "table.md").write_text(markdown)
     (out / "table.csv").write_text(full_csv(rows, metrics, notes))
     plot_scale = shown if shown in scales or not scales else ("2x" if "2x" in scales else scales[0])
-    tradeoff_plot(rows, metrics, out / "tradeoff.png", shown)  # "avg" plots the means over scales
+    tradeoff_plot(rows, metrics, out / "tradeoff.png", shown, cost)  # "avg" plots the means over scales
     qualitative_figure(client, groups, out / "qualitative.png", plot_scale)
     frames_plot(client, groups, out / "frames.png", plot_scale)
     print(markdown)
@@ -751,6 +939,13 @@ def main(argv: Sequence[str] | None = None) -> None:
         help="the scale of the table and plots, e.g. 3x, or avg (default: the sweep's only test scale, else its "
         "paper table's: 2x for the ablations, 3x for methods, avg for scales)",
     )
+    parser.add_argument(
+        "--runtime",
+        default=None,
+        metavar="SWEEP",
+        help="take the plot's ms/frame and GFLOPs from this runtime sweep (name or parent run id; sweeps/runtime.yaml "
+        "times every configuration in one process) instead of each run's own timing",
+    )
     args = parser.parse_args(argv)
     if args.filter and not args.experiment:
         parser.error("--filter selects among the runs of --experiment")
@@ -764,6 +959,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         tracking_uri=args.tracking_uri,
         out_dir=args.out,
         scale=args.scale,
+        runtime=args.runtime,
     )
 
 

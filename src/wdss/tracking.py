@@ -1,9 +1,11 @@
 """MLflow tracking: the logger of a run, its tags and artifacts, and one parent run per sweep.
 
-Runs are named by their overrides (``basis=db4,transform=swt``) and tagged with every config-group choice
-(``transform``, ``basis``, ``head``, ``scale``, ``temporal``, ``model``, ``data``, ...), the seed and the git
-commit, so the MLflow UI can group and compare them. A multirun gets a parent run (created by the Hydra
-callback :class:`SweepParentRun`) and every job is nested under it.
+Runs are named variant first (``swt_db4 · cpu · seed0 · mini``: what a name cut short by the UI still tells
+apart), tagged with their Hydra overrides (``overrides``: ``experiment=cpu,seed=0,variant=swt_db4``, which the
+report reads), every config-group choice (``transform``, ``basis``, ``head``, ``scale``, ``temporal``, ``model``,
+``data``, ...), the seed, the data root and the git commit, and carry a score of params that say how the run was
+set up (:func:`run_params`), so the MLflow UI can group and compare them. A multirun gets a parent run (created by
+the Hydra callback :class:`SweepParentRun`) and every job is nested under it.
 """
 
 from __future__ import annotations
@@ -11,8 +13,10 @@ from __future__ import annotations
 import atexit
 import fcntl
 import os
+import re
 import socket
 import subprocess
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -30,8 +34,12 @@ __all__ = [
     "prepare_store",
     "reap_dead_runs",
     "data_tags",
+    "run_key",
     "run_name",
+    "run_overrides",
+    "run_params",
     "run_tags",
+    "split_overrides",
     "runs_view_url",
     "run_links",
 ]
@@ -76,36 +84,202 @@ def _hydra() -> Any | None:
     return HydraConfig.get() if HydraConfig.initialized() else None
 
 
+# Hydra's override_dirname joins ``key=value`` items with commas and does not escape list values ("[2.0,3.0]"):
+# an item starts only where a key and "=" follow the comma.
+_ITEM = re.compile(r",(?=[+~]*[\w.@/-]+=)")
+NAME_SEPARATOR = " · "
+# Config groups a baseline ignores (it has no wavelet, head or temporal branch): neither named nor tagged for it.
+_BASELINE_IGNORES = ("transform", "basis", "head", "temporal", "scale")
+
+
+def split_overrides(text: str) -> list[tuple[str, str | None]]:
+    """``override_dirname`` as (key, value) items, list values kept whole; a deletion (``~key``) has no value."""
+    items = []
+    for item in _ITEM.split(text) if text else []:
+        key, sep, value = item.partition("=")
+        items.append((key.lstrip("+~"), value if sep else None))
+    return items
+
+
+def run_overrides(cfg: DictConfig) -> str:
+    """The job's overrides as Hydra joins them (``override_dirname``: ``basis=db4,transform=swt``), without the keys
+    that do not change the configuration (``ckpt_path``, ``trainer.max_epochs``, ...: conf/hydra/default.yaml);
+    empty outside a Hydra app or without overrides. Tagged ``overrides``: the report's axes."""
+    hydra = _hydra()
+    return str(hydra.job.override_dirname) if hydra is not None else ""
+
+
+def run_key(cfg: DictConfig) -> str:
+    """What ``ckpt_path=last`` matches a run folder by: ``cfg.run_name`` when given, else the overrides, else
+    ``default`` (what runs were named before names led with the variant, so older folders still match)."""
+    return str(cfg.run_name) if cfg.get("run_name") else (run_overrides(cfg) or "default")
+
+
+@cache
+def _default_choices() -> dict[str, str]:
+    """conf/train.yaml's choice per group: an override that picks it again does not tell a run apart."""
+    from wdss.paths import CONF_DIR
+
+    defaults = OmegaConf.load(CONF_DIR / "train.yaml").get("defaults", [])
+    return {str(k): str(v) for item in defaults if OmegaConf.is_dict(item) for k, v in item.items()}
+
+
+def _baseline(cfg: DictConfig) -> bool:
+    return str(OmegaConf.select(cfg, "model.net._target_", default="")).endswith("Upsample")
+
+
+def _subject(cfg: DictConfig, choices: dict) -> tuple[str, set[str]]:
+    """The first part of a run's name (the variant, else a baseline's or other model's choice, else the wavelet
+    as ``transform_basis``) and the override keys it says."""
+    if choices.get("variant"):
+        said = {"variant", "model", "transform", "basis"}  # a variant picks them
+        return ("no_wavelet" if choices["variant"] == "none" else str(choices["variant"])), said
+    model = choices.get("model")
+    if _baseline(cfg) or (model and model != _default_choices().get("model")):
+        return str(model or "baseline"), {"model", *(_BASELINE_IGNORES if _baseline(cfg) else ())}
+    transform = str(OmegaConf.select(cfg, "transform.transform", default=choices.get("transform", "")))
+    if transform == "none":
+        return "no_wavelet", {"transform", "basis"}
+    basis = str(OmegaConf.select(cfg, "transform.wavelet", default=choices.get("basis", "")))
+    return "_".join(p for p in (transform, basis) if p) or "default", {"transform", "basis"}
+
+
+def _data_part(cfg: DictConfig) -> str:
+    """The data root's folder name (``mini``), and the test root's after an arrow when the run tests on another."""
+    root = OmegaConf.select(cfg, "data.root", default=None)
+    if root is None:
+        return ""
+    test_root = OmegaConf.select(cfg, "data.test_root", default=None)
+    name = Path(str(root)).name
+    return f"{name}→{Path(str(test_root)).name}" if test_root is not None and test_root != root else name
+
+
 def run_name(cfg: DictConfig) -> str:
-    """``cfg.run_name``, else the job's overrides (without seeds and paths), else ``default``."""
+    """``cfg.run_name``, else variant first, then the other overrides that tell this run apart, the seed and the
+    data root's name: ``swt_db4 · cpu · lr=0.002 · seed0 · mini``. A group's choice is shown bare, a value by
+    its last key (the full overrides are the tag ``overrides``)."""
     if cfg.get("run_name"):
         return str(cfg.run_name)
     hydra = _hydra()
-    name = hydra.job.override_dirname if hydra is not None else ""
-    return name or "default"
+    choices = dict(hydra.runtime.choices) if hydra is not None else {}
+    subject, said = _subject(cfg, choices)
+    said |= {"seed", "data", "data.root", "data.test_root", "run_name", "experiment_name"}
+    defaults = _default_choices()
+    items = []
+    for key, value in split_overrides(run_overrides(cfg)):
+        if key in said or key.startswith(("paths.", "hydra.", "tags.")):
+            continue
+        if value is None:
+            items.append((key, f"~{key}"))
+        elif key in choices:  # a group: what ran, unless the default or replaced (a variant picks its model)
+            if str(choices[key]) == value and value != defaults.get(key):
+                items.append((key, value))
+        else:
+            items.append((key, value))
+    items.sort(key=lambda item: item[0] not in choices)  # the choices of groups first, then single values
+    short = [key.rsplit(".", 1)[-1] for key, _ in items]
+    parts = [subject]
+    for (key, value), last in zip(items, short, strict=True):
+        if key in choices or value.startswith("~"):
+            parts.append(value)
+        else:  # the last key alone unless two items share it
+            parts.append(f"{last if short.count(last) == 1 else key}={value}")
+    parts.append(f"seed{cfg.get('seed')}")
+    parts.append(_data_part(cfg))
+    return NAME_SEPARATOR.join(p for p in parts if p)
+
+
+# Config values logged as params beside the group choices: what a reader of the runs table compares. The run's own
+# overrides are logged too (a sweep's axes); paths only relative to the project, never absolute.
+PARAMS = (
+    "seed",
+    "model.optimizer.lr",
+    "trainer.max_epochs",
+    "trainer.max_steps",
+    "data.batch_size",
+    "data.patch_size",
+    "data.patches_per_frame",
+    "scale.train",
+    "data.test_scales",
+    "loss.space",
+    "model.net.residual",
+    "model.tonemap_name",  # the report's metric path
+    "tonemap_exposure",
+)
+PARAM_GROUPS = (
+    "variant",
+    "model",
+    "transform",
+    "basis",
+    "head",
+    "scale",
+    "temporal",
+    "size",
+    "data",
+    "trainer",
+    "callbacks",
+    "experiment",
+)
+_MISSING = object()
+
+
+def _param_value(value: Any) -> str:
+    if OmegaConf.is_config(value):
+        value = OmegaConf.to_container(value, resolve=True)
+    return str(value)
+
+
+def run_params(cfg: DictConfig) -> dict[str, str]:
+    """About twenty params of a training run: the group choices (``n/a`` where a baseline ignores them), the learning
+    rate, epochs, batch and patch size, scales, seed, the data roots relative to the project, the tone map, and
+    the run's own overrides; no absolute path. The full config is the artifact ``config.yaml``."""
+    params = _group_choices(cfg, PARAM_GROUPS)
+    for key in PARAMS:
+        value = OmegaConf.select(cfg, key, default=_MISSING)
+        if value is not _MISSING:
+            params[key] = _param_value(value)
+    root = OmegaConf.select(cfg, "data.root", default=None)
+    if root is not None:
+        params["data.root"] = _shown_path(root, cfg, "name")
+        test_root = OmegaConf.select(cfg, "data.test_root", default=None)
+        if test_root is not None:
+            params["data.test_root"] = _shown_path(test_root, cfg, "name")
+    for key, value in split_overrides(run_overrides(cfg)):
+        if value is None or key in params or key.startswith(("paths.", "hydra.")) or key == "ckpt_path":
+            continue
+        if key in PARAM_GROUPS:
+            continue  # the choice that ran is logged above (a variant may have replaced the override)
+        selected = OmegaConf.select(cfg, key, default=_MISSING)
+        shown = _param_value(selected) if selected is not _MISSING else value
+        if key.endswith(("root", "dir", "path")) and shown not in ("None", ""):
+            shown = _shown_path(shown, cfg, "name")
+        params[key] = shown
+    return params
+
+
+def _group_choices(cfg: DictConfig, groups: tuple[str, ...] = GROUPS) -> dict[str, str]:
+    """The choice of each config group that has one; ``n/a (...)`` where the run ignores the group."""
+    hydra = _hydra()
+    choices = {g: str(c) for g in groups if hydra is not None and (c := hydra.runtime.choices.get(g)) is not None}
+    if choices.get("transform") == "none" and "basis" in choices:
+        choices["basis"] = "n/a (transform=none)"  # the basis is ignored without a wavelet transform
+    if _baseline(cfg):  # baselines have no wavelet, head or temporal branch
+        choices.update({key: "n/a (baseline)" for key in _BASELINE_IGNORES if key in groups})
+    return choices
 
 
 def run_tags(cfg: DictConfig) -> dict[str, str]:
-    """A tag per config-group choice, the seed, the git commit, and the sweep parent when there is one."""
-    tags: dict[str, str] = {}
+    """A tag per config-group choice, the overrides, the seed, the data root, the git commit, and the sweep parent
+    when there is one."""
+    tags = _group_choices(cfg)
     hydra = _hydra()
-    if hydra is not None:
-        for group in GROUPS:
-            choice = hydra.runtime.choices.get(group)
-            if choice is not None:
-                tags[group] = str(choice)
-        if hydra.mode == RunMode.MULTIRUN:
-            parent = Path(hydra.sweep.dir) / PARENT_FILE
-            if parent.exists():
-                tags["mlflow.parentRunId"] = parent.read_text().strip()
-            tags["sweep"] = hydra.job.config_name
-            tags["job"] = str(hydra.job.num)
-    if tags.get("transform") == "none":
-        tags["basis"] = "n/a (transform=none)"  # the basis is ignored without a wavelet transform
-    net_target = str(OmegaConf.select(cfg, "model.net._target_", default=""))
-    if net_target.endswith("Upsample"):  # baselines have no wavelet, head or temporal branch
-        for key in ("transform", "basis", "head", "temporal", "scale"):
-            tags[key] = "n/a (baseline)"
+    if hydra is not None and hydra.mode == RunMode.MULTIRUN:
+        parent = Path(hydra.sweep.dir) / PARENT_FILE
+        if parent.exists():
+            tags["mlflow.parentRunId"] = parent.read_text().strip()
+        tags["sweep"] = hydra.job.config_name
+        tags["job"] = str(hydra.job.num)
+    tags["overrides"] = run_overrides(cfg)  # present even when empty: the report never parses the name
     tags["seed"] = str(cfg.get("seed"))
     tags.update(data_tags(cfg))
     tags["git_commit"] = git_commit(OmegaConf.select(cfg, "paths.root_dir", default="."))
@@ -114,14 +288,15 @@ def run_tags(cfg: DictConfig) -> dict[str, str]:
     return tags
 
 
-def _shown_path(path: Any, cfg: DictConfig) -> str:
-    """A data folder as a tag shows it: relative to the project when it lies inside, else as given."""
+def _shown_path(path: Any, cfg: DictConfig, outside: str = "as given") -> str:
+    """A data folder as a tag shows it: relative to the project when it lies inside, else as given (``outside=
+    "name"``: its name, as params show it: no absolute path)."""
     folder = Path(str(path))
     root = Path(str(OmegaConf.select(cfg, "paths.root_dir", default=".")))
     try:
         return str(folder.resolve().relative_to(root.resolve()))
     except ValueError:
-        return str(folder)
+        return folder.name if outside == "name" and folder.is_absolute() else str(folder)
 
 
 def data_tags(cfg: DictConfig) -> dict[str, str]:
@@ -281,7 +456,8 @@ class SweepParentRun(Callback):
 
     @staticmethod
     def _close(uri: str, run_id: str) -> None:
-        """End the parent run once, noting how many jobs failed (their cells are marked in the report)."""
+        """End the parent run once, noting how many jobs failed (their cells are marked in the report) and the data
+        roots its jobs read."""
         from mlflow import MlflowClient
 
         client = MlflowClient(uri)
@@ -290,6 +466,9 @@ class SweepParentRun(Callback):
         experiment = client.get_run(run_id).info.experiment_id
         jobs = client.search_runs([experiment], filter_string=f"tags.mlflow.parentRunId = '{run_id}'")
         failed = sum(j.info.status != "FINISHED" for j in jobs)
+        roots = sorted({j.data.tags["data_root"] for j in jobs if "data_root" in j.data.tags})
+        if roots:  # the sweep's row in the runs table shows its data too
+            client.set_tag(run_id, "data_root", roots[0] if len(roots) == 1 else f"several: {', '.join(roots)}")
         client.set_tag(run_id, "jobs", str(len(jobs)))
         client.set_tag(run_id, "failed_jobs", str(failed))
         client.set_terminated(run_id, "FINISHED")

@@ -4,7 +4,7 @@
 configuration, seeds everything, builds the LightningModule, the DataModule (asking it for exactly the
 batch keys the model consumes), the MLflow logger and the Trainer, fits (unless the model is a baseline),
 tests on every test scale, and logs the inference cost. ``ckpt_path=last`` resumes the newest run of the
-same configuration, in the same MLflow run.
+same configuration (its overrides, or its ``run_name``), in the same MLflow run.
 """
 
 from __future__ import annotations
@@ -36,8 +36,10 @@ from wdss.tracking import (
     ensure_experiment,
     prepare_store,
     reap_dead_runs,
+    run_key,
     run_links,
     run_name,
+    run_params,
     run_tags,
 )
 
@@ -131,24 +133,29 @@ def validate(cfg: DictConfig) -> None:
         pass  # the basis is ignored and tagged "n/a" (see wdss.tracking.run_tags), not an error
 
 
-def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
-    """``ckpt_path=last``: the ``last.ckpt`` of the newest run with the same name, and that run's MLflow id.
+RUN_KEY_FILE = "run_key"  # in a run's output directory: what ckpt_path=last matches (wdss.tracking.run_key)
 
-    The newest run is the one started last (its ``run_name`` file is written at the start). Runs of that name
-    still checkpointing after it started trained at the same time: then no run is "the newest", and guessing
-    would resume one run's weights into another's record, so the choice is refused, listing them.
+
+def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
+    """``ckpt_path=last``: the ``last.ckpt`` of the newest run of the same configuration, and that run's MLflow id.
+
+    A run folder records its configuration at the start (``run_key``: its ``run_name`` when given, else its
+    overrides; folders from before the names led with the variant recorded it as ``run_name``). The newest run is
+    the one started last. Runs of that configuration still checkpointing after it started trained at the same time:
+    then no run is "the newest", and guessing would resume one run's weights into another's record, so the choice
+    is refused, listing them.
     """
     if cfg.get("ckpt_path") != "last":
         return (str(cfg.ckpt_path) if cfg.get("ckpt_path") else None), None
-    name = run_name(cfg)
+    key = run_key(cfg)
     log_dir = Path(str(cfg.paths.log_dir))
     candidates = sorted(
-        ((ckpt.parent.parent / "run_name").stat().st_mtime, ckpt)
+        (_key_file(ckpt.parent.parent).stat().st_mtime, ckpt)
         for ckpt in log_dir.glob("**/checkpoints/last.ckpt")
-        if _recorded(ckpt.parent.parent, "run_name") == name
+        if _key_file(ckpt.parent.parent).is_file() and _key_file(ckpt.parent.parent).read_text().strip() == key
     )
     if not candidates:
-        print(f"wdss.train: no last.ckpt of a run named {name!r} under {log_dir}: starting from scratch")
+        print(f"wdss.train: no last.ckpt of a run of {key!r} under {log_dir}: starting from scratch")
         return None, None
     started, ckpt = candidates[-1]
     concurrent = [other for _, other in candidates[:-1] if other.stat().st_mtime > started]
@@ -157,7 +164,7 @@ def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
             f"  {path} (MLflow run {_recorded(path.parent.parent, RUN_ID_FILE)})" for path in [ckpt, *concurrent]
         )
         raise ConfigError(
-            f"ckpt_path=last is ambiguous: {len(concurrent) + 1} runs named {name!r} trained at the same time:\n"
+            f"ckpt_path=last is ambiguous: {len(concurrent) + 1} runs of {key!r} trained at the same time:\n"
             f"{listing}\nresume one of them with ckpt_path=PATH"
         )
     run_id = _recorded(ckpt.parent.parent, RUN_ID_FILE)
@@ -165,21 +172,15 @@ def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
     return str(ckpt), run_id
 
 
+def _key_file(run_dir: Path) -> Path:
+    """The file that holds a run folder's configuration key: ``run_key``, or ``run_name`` in older folders."""
+    return run_dir / RUN_KEY_FILE if (run_dir / RUN_KEY_FILE).is_file() else run_dir / "run_name"
+
+
 def _recorded(run_dir: Path, name: str) -> str | None:
-    """What a run folder recorded at its start (``run_name``, ``mlflow_run_id``), if it did."""
+    """What a run folder recorded at its start (``run_key``, ``mlflow_run_id``), if it did."""
     file = run_dir / name
     return file.read_text().strip() if file.exists() else None
-
-
-def _flat(config: dict, prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in config.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            out.update(_flat(value, f"{name}."))
-        else:
-            out[name] = value
-    return out
 
 
 def train(cfg: DictConfig) -> dict[str, float]:
@@ -210,7 +211,8 @@ def train(cfg: DictConfig) -> dict[str, float]:
     # Under DDP this function runs once per rank (rank 0 starts the others: wdss.distributed). The Trainer knows
     # which rank this is, so it comes first: only rank 0 touches MLflow and writes the run's records.
     use_rank_command("wdss.train")
-    trainer = instantiate(cfg.trainer, logger=False, callbacks=callbacks)
+    # No autologged hyper-parameters: the module's would repeat the config (run_params says what matters).
+    trainer = instantiate(cfg.trainer, logger=False, callbacks=callbacks, enable_autolog_hparams=False)
     if cfg.get("video") and cfg.get("test") and trainer.world_size > 1:
         raise ConfigError(
             "video=true needs one process (under DDP each rank tests a share of the frames): test the checkpoint "
@@ -232,11 +234,12 @@ def train(cfg: DictConfig) -> dict[str, float]:
         if resume_run:  # a resumed run is this process's now
             logger.experiment.set_tag(resume_run, "pid", str(os.getpid()))
         (output_dir / "run_name").write_text(name)
+        (output_dir / RUN_KEY_FILE).write_text(run_key(cfg))
         (output_dir / RUN_ID_FILE).write_text(logger.run_id)
 
     resolved = OmegaConf.to_container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]), resolve=True)
-    if resume_run is None:
-        logger.log_hyperparams(_flat(resolved))
+    if resume_run is None:  # params are immutable in MLflow: a resumed run keeps those it started with
+        logger.log_hyperparams(run_params(cfg))
     experiment, run_id = logger.experiment, logger.run_id
     experiment.log_text(run_id, OmegaConf.to_yaml(resolved), "config.yaml")
     hydra_dir = output_dir / ".hydra"
@@ -325,8 +328,9 @@ def _stopped_by(error: BaseException) -> signal.Signals | None:
 
 
 def _bench(cfg: DictConfig, module: Any, logger: Any) -> dict[str, float]:
-    """Inference cost at ``cfg.bench``: median ms and GFLOPs of one forward, logged as ``bench/*``."""
-    from wdss.model.profile import dummy_inputs, flops, forward_ms
+    """Inference cost at ``cfg.bench``: median ms and GFLOPs of one forward, logged as ``bench/*``, and tagged with
+    the device, the output size and the process that timed it (the report compares only timings of one process)."""
+    from wdss.model.profile import PROCESS, device_name, dummy_inputs, flops, forward_ms
 
     bench = cfg.get("bench")
     if not bench:
@@ -342,6 +346,13 @@ def _bench(cfg: DictConfig, module: Any, logger: Any) -> dict[str, float]:
     }
     for key, value in values.items():
         logger.experiment.log_metric(logger.run_id, key, value)
+    tags = {
+        "bench/device": device_name(module.device),
+        "bench/resolution": f"{int(bench.width)}x{int(bench.height)} output, {scale:g}x",
+        "bench/process": PROCESS,
+    }
+    for key, value in tags.items():
+        logger.experiment.set_tag(logger.run_id, key, value)
     return values
 
 

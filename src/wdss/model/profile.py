@@ -7,8 +7,12 @@ after on a GPU) and counts FLOPs, which do not depend on the machine.
 from __future__ import annotations
 
 import inspect
+import os
+import platform
+import socket
 import statistics
 import time
+import uuid
 
 import torch
 from torch import nn
@@ -16,7 +20,25 @@ from torch.utils.flop_counter import FlopCounterMode
 
 from wdss.data.sampling import lr_size
 
-__all__ = ["dummy_inputs", "flops", "forward_ms"]
+__all__ = ["PROCESS", "device_name", "dummy_inputs", "flops", "forward_ms"]
+
+# This process, as timings record it: runs timed by one process (a sweep's jobs run one after another) compare
+# fairly; runs timed by different processes ran under other loads, clocks and thread counts.
+PROCESS = f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
+
+
+def device_name(device: str | torch.device) -> str:
+    """The device a timing ran on, as a reader compares timings: the GPU's name, or the CPU's and its threads."""
+    device = torch.device(device)
+    if device.type == "cuda":
+        return f"cuda: {torch.cuda.get_device_name(device)}"
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as info:
+            cpu = next((line.split(":", 1)[1].strip() for line in info if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return f"{device.type}: {cpu} ({torch.get_num_threads()} threads)"
 
 
 def dummy_inputs(net: nn.Module, height: int, width: int, scale: float, device: str = "cpu") -> dict:
