@@ -451,3 +451,27 @@ def test_frames_plot_lines_of_equal_values_stay_apart(tmp_path):
     assert len({(line.get_marker(), line.get_linestyle()) for line in lines}) == 3
     assert len({tuple(line.get_xdata()) for line in lines}) == 3  # shifted sideways, a fraction of a frame
     assert all(abs(x - round(x)) <= 0.15 + 1e-9 for line in lines for x in line.get_xdata())
+
+
+def test_each_row_is_stated_over_the_learned_kernel_alone_and_the_orderings_at_every_scale(tmp_path):
+    psnr = {"learned_bilateral": (29.0, 29.3, 29.1), "none": (29.2, 29.4, 29.5), "swt_db4": (29.9, 30.4, 30.0)}
+    jobs = [
+        (
+            {"variant": v, "seed": str(s)},
+            {"test/psnr_2x": psnr[v][s], "test/psnr_4x": psnr[v][s] - 3 + (v != "none")},
+            "",
+        )
+        for v in psnr
+        for s in SEEDS
+    ]
+    uri = fake_sweep(tmp_path, "ablation_wavelet", [(job, metrics, "FINISHED") for job, metrics, _ in jobs])
+    text = (report("ablation_wavelet", tracking_uri=uri, out_dir=tmp_path / "reports") / "table.md").read_text()
+    lines = text[text.index("Each row minus the learned kernel alone") :].splitlines()
+    rows = {cells[0]: cells[1:] for cells in ([c.strip() for c in line.strip("|").split("|")] for line in lines[4:6])}
+    assert lines[2] == "| | 2x | 4x |"
+    for variant, label in (("swt_db4", "SWT-db4"), ("none", "No wavelet")):
+        at_2x = [a - b for a, b in zip(psnr[variant], psnr["learned_bilateral"], strict=True)]
+        assert rows[label][0] == f"{np.mean(at_2x):+.2f} ± {t_half_width(at_2x):.2f}, n=3"
+    assert rows["No wavelet"][1].startswith(f"{np.mean([0.2, 0.1, 0.4]) - 1:+.2f} ± ")  # its own 4x offset
+    assert "Learned bilateral" not in rows and len(rows) == 2
+    assert "The paper's orderings at 2x" in text and "The paper's orderings at 4x" in text

@@ -453,6 +453,42 @@ def orderings(sweep: str, groups: dict[str, list], scale: str, scales: Sequence[
     return "\n".join(lines) + "\n"
 
 
+KERNEL = "learned_bilateral"  # the learned kernel alone: the residual base experiment=cpu's networks add to
+
+
+def over_kernel(groups: dict[str, list], scales: Sequence[str]) -> str:
+    """Each row's PSNR minus the learned kernel alone's (a ``learned_bilateral`` row of the same runs), paired by
+    seed, at every tested scale: for a network built on that kernel, what the network adds over the start it
+    corrects. Empty without exactly one kernel row or without test scales."""
+    kernels = [row for row, row_runs in groups.items() if row_runs[0].data.tags.get("variant") == KERNEL]
+    if len(kernels) != 1 or not scales:
+        return ""
+
+    def by_seed(row: str, scale: str) -> dict[str, float]:
+        return {_seed(r): _psnr(r, scale, scales) for r in groups[row] if r.info.status == "FINISHED"}
+
+    lines = [
+        f"\nEach row minus the learned kernel alone ({kernels[0]}), PSNR paired by seed (mean ± 95% half-width, n): "
+        "for a network that adds its output to that kernel, what the network adds.\n",
+        "| | " + " | ".join(scales) + " |",
+        "|---|" + "---|" * len(scales),
+    ]
+    for row in groups:
+        if row == kernels[0]:
+            continue
+        cells = []
+        for scale in scales:
+            kernel, own = by_seed(kernels[0], scale), by_seed(row, scale)
+            differences = [own[seed] - kernel[seed] for seed in sorted(set(own) & set(kernel))]
+            mean, half = interval(differences)
+            cells.append(
+                "n/a" if not math.isfinite(mean)
+                else f"{mean:+.2f}" + (f" ± {half:.2f}" if math.isfinite(half) else "") + f", n={len(differences)}"
+            )  # fmt: skip
+        lines.append(f"| {row} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def full_csv(rows: Sequence[str], metrics, notes: dict[str, str]) -> str:
     """Every metric of every row: mean, 95% half-width (empty below two seeds) and n."""
     keys = sorted({k for m in metrics.values() for k in m})
@@ -892,7 +928,8 @@ def report(
         + compact_table(
             rows, metrics, notes, columns, scales, {row: _tags(g[0]).get("data_root") for row, g in groups.items()}
         )
-        + orderings(name, groups, shown, scales)
+        + "".join(orderings(name, groups, at, scales) for at in [shown, *(s for s in scales if s != shown)])
+        + over_kernel(groups, scales)
         + (TEMPORAL_NOTE if any("twe_ratio" in key or "tpsnr" in key for key, *_ in columns) else "")
         + (noise_ceiling_note(runs) if scales else "")
         + ("\nCosts (tradeoff.png): " + " ".join(cost.notes) + "\n" if cost.notes else "")
