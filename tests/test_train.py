@@ -471,8 +471,11 @@ def test_eval_logs_temporal_metrics_per_frame_histories_and_videos_of_each_test_
     with av.open(mp4) as container:
         frames = [frame.to_ndarray(format="rgb24") for frame in container.decode(video=0)]
         assert container.streams.video[0].codec_context.name == "h264"
-    # Four 96x48 tiles (LR | prediction | target | error) under a 14-pixel label strip, one frame per test frame.
-    assert len(frames) == 4 and frames[0].shape == (48 + 14, 4 * 96, 3)
+    # Four 96x48 tiles (LR | prediction | target | error) under a 14-pixel label strip, one frame per test frame,
+    # the sequence played as often as it takes to last a few seconds.
+    from wdss.video import loops
+
+    assert len(frames) == 4 * loops(4, 30) and frames[0].shape == (48 + 14, 4 * 96, 3)
 
 
 def test_a_failed_eval_leaves_the_training_run_as_it_was(tmp_path, tracking, monkeypatch):

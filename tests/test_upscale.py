@@ -1,4 +1,5 @@
-"""wdss.upscale: a checkpoint's model on a sequence, frames wdss reads back, metrics, resume, unreadable frames."""
+"""wdss.upscale: a checkpoint's model on a sequence, frames wdss reads back, metrics, resume, unreadable frames,
+the comparison panels, a scale the model was not trained at."""
 
 from __future__ import annotations
 
@@ -9,14 +10,16 @@ import numpy as np
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf, open_dict
+from PIL import Image
 
 from tests.model.helpers import fixture_batches, tiny_checkpoint
-from tests.test_train import run_module
+from tests.test_train import compose_train, run_module
 from wdss.data.layouts import Sequence
 from wdss.data.synthetic import write_sequence
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR, PROJECT_ROOT
-from wdss.upscale import UpscaleError, upscale
+from wdss.upscale import UpscaleError, scale_warning, upscale
 
 FIXTURE = PROJECT_ROOT / "tests" / "fixtures" / "rendered" / "fixture_000"
 
@@ -106,11 +109,59 @@ def test_an_input_without_hr_colour_is_upscaled_in_its_own_layout(tmp_path):
     shutil.rmtree(sequence / "Nojitter-24P")  # no HR colour
     ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "variant=dfasr")
     out = tmp_path / "up"
-    metrics = upscale(compose_upscale(tmp_path, f"ckpt_path={ckpt}", f"input={sequence}", f"output={out}"))
+    args = (f"ckpt_path={ckpt}", f"input={sequence}", f"output={out}", "compare=true")
+    metrics = upscale(compose_upscale(tmp_path, *args))
     assert metrics == {}
     colour = written(out, (1, 2, 3))
     assert (out / "Nojitter-24P" / "SyntheticPreTonemapHDRColor.0002.exr").is_file()
     assert all(c.shape == (3, 24, 36) and np.isfinite(c).all() for c in colour.values())
+    # No target to show: baseline | prediction under their labels
+    assert np.asarray(Image.open(out / "compare" / "0002.png")).shape == (14 + 24, 2 * 36, 3)
+
+
+def test_compare_shows_the_target_and_the_error_x4_where_the_input_has_the_hr_colour(tmp_path):
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "transform=swt", "basis=haar")
+    out = tmp_path / "up"
+    args = (f"ckpt_path={ckpt}", f"input={FIXTURE}", f"output={out}", "frames=[1,3]", "compare=true", "metrics=false")
+    upscale(compose_upscale(tmp_path, *args))
+    panel = np.asarray(Image.open(out / "compare" / "0002.png")).astype(int)
+    assert panel.shape == (14 + 48, 4 * 96, 3)  # bilinear_demodulated | prediction | target | error x4, labelled
+    assert all(panel[:14, i * 96 : (i + 1) * 96].max() > 200 for i in range(4))  # a label over each tile
+    base, pred, target, error = (panel[14:, i * 96 : (i + 1) * 96] for i in range(4))
+    assert np.array_equal(pred, np.asarray(Image.open(out / "png" / "0002.png")))  # as png/ shows it
+    expected = ([s["target"] for s in fixture_batches(["target"]) if int(s["frame"][0]) == 2][0])[0]
+    module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
+    shown = (module.tone(expected[None], expected[None])[0].permute(1, 2, 0).numpy() * 255).round()
+    assert np.abs(target - shown).max() <= 1  # the input's HR colour, tone-mapped as the metrics see it
+    assert np.abs(error - np.clip(np.abs(pred - target) * 4, 0, 255)).max() <= 4  # from unrounded tiles
+    assert error.max() > 0 and np.abs(base - pred).max() > 0
+
+
+def test_a_scale_outside_the_trained_ones_is_warned_about_recorded_and_upscaled(tmp_path, capsys):
+    """The run's scales come from its ``.hydra/config.yaml`` beside ``checkpoints/`` (``data.scale``, unresolved
+    as Hydra saves it); a checkpoint outside a run folder gets no warning (its scales are unknown)."""
+    run = tmp_path / "run"
+    ckpt = tiny_checkpoint(run / "checkpoints" / "last.ckpt", "transform=dwt", "basis=haar", "temporal=none")
+    config = compose_train(["scale=arbitrary"])
+    with open_dict(config):
+        del config["hydra"]
+    (run / ".hydra").mkdir()
+    OmegaConf.save(config, run / ".hydra" / "config.yaml")  # data.scale: ${scale.train} = [2.0, 4.0]
+    args = (f"ckpt_path={ckpt}", f"input={FIXTURE}", "frames=[0,2]")
+    upscale(compose_upscale(tmp_path, *args, "scale=5", f"output={tmp_path / 'up5'}"))
+    warning = "scale 5x is outside the scales the model was trained at (2x to 4x): going on, expect artefacts"
+    err = capsys.readouterr().err
+    assert f"wdss.upscale: WARNING: {warning}" in err and err.count("WARNING") == 1
+    record = json.loads((tmp_path / "up5" / "upscale.json").read_text())
+    assert record["warnings"] == [warning] and sorted(record["frames"]) == ["0", "1"]
+    upscale(compose_upscale(tmp_path, *args, "scale=3", f"output={tmp_path / 'up3'}"))
+    assert "WARNING" not in capsys.readouterr().err
+    assert json.loads((tmp_path / "up3" / "upscale.json").read_text())["warnings"] == []
+    assert scale_warning(2.5, {"choices": (2.0, 3.0, 4.0)}).startswith("scale 2.5x is outside") and "2x, 3x, 4x" in (
+        scale_warning(2.5, {"choices": (2.0, 3.0, 4.0)})
+    )
+    assert scale_warning(3.0, {"choices": (2.0, 3.0, 4.0)}) is None and scale_warning(3.0, None) is None
+    assert "(2x only)" in scale_warning(4.0, 2.0) and scale_warning(2.0, 2.0) is None
 
 
 @pytest.mark.slow
@@ -125,7 +176,7 @@ def test_python_m_wdss_upscale_writes_a_side_by_side_video(tmp_path):
     assert "overall (5 frames): PSNR" in done.stdout
     with av.open(str(out / "fixture_000_2x.mp4")) as video:
         frames = [frame.to_ndarray(format="rgb24") for frame in video.decode(video=0)]
-    assert len(frames) == 5 and frames[0].shape[1] == 2 * 96  # baseline | prediction
+    assert len(frames) == 5 * 18 and frames[0].shape[1] == 4 * 96  # 5 frames looped to 3 s; baseline | ... | error
 
 
 @pytest.mark.parametrize(

@@ -8,9 +8,11 @@ frame by frame in order: a recurrent model is fed its own previous output, warpe
 
 * per frame, the HR prediction as linear HDR EXR under the input's own name for the HR colour buffer, so that
   wdss reads the folder back as a sequence, and ``png/<frame>.png`` tone-mapped as the module's metrics see it
-  (with ``compare``: ``compare/<frame>.png``, bilinear-demodulated baseline | prediction);
-* ``<sequence>_<s>x.mp4`` of the PNGs (:mod:`wdss.video`);
-* ``upscale.json``: what made the frames (checkpoint digest, input, scale), each frame's metrics, skipped frames.
+  (with ``compare``: ``compare/<frame>.png``, bilinear-demodulated baseline | prediction, and where the input
+  holds the HR colour | target | error x4, as the eval videos show them);
+* ``<sequence>_<s>x.mp4`` of the PNGs at the sequence's frame rate, a short one looped to last 3 s (:mod:`wdss.video`);
+* ``upscale.json``: what made the frames (checkpoint digest, input, scale), each frame's metrics, skipped frames,
+  warnings (a scale outside those the model was trained at).
 
 When the input holds the HR colour (a wdss dataset) it is the target: PSNR, SSIM and FLIP are printed per frame
 and overall. A rerun of a killed run resumes: a frame whose files all exist is not computed again (each file is
@@ -42,16 +44,16 @@ from omegaconf import DictConfig, OmegaConf
 from torch import Tensor
 
 from wdss.checkpoint import read_checkpoint, training_preprocessing
-from wdss.data.dataset import Collate, FrameDataset, Preprocessing
+from wdss.data.dataset import Collate, FrameDataset, Preprocessing, ScaleSpec, parse_scale
 from wdss.data.exr import ExrError, read_exr, write_exr
 from wdss.data.layouts import SceneError, Sequence
 from wdss.data.preprocess import prediction_color, target_irradiance
 from wdss.model.baselines import Upsample
 from wdss.model.blocks import fold_rir_blocks
-from wdss.model.module import SuperResolutionModule
+from wdss.model.module import SuperResolutionModule, comparison_panel
 from wdss.paths import CONF_DIR
 from wdss.progress import Progress
-from wdss.video import Mp4Writer, labelled
+from wdss.video import LABELS, Mp4Writer, labelled
 
 __all__ = ["UpscaleError", "main", "output_name", "upscale"]
 
@@ -81,6 +83,38 @@ def output_name(seq: Sequence, frame: int) -> str:
             folder, _, file = name.partition("/")
             return re.sub(r"\d+P$", f"{seq.hr}P", folder) + f"/{file}"
     raise SceneError(f"sequence {seq.name!r}, frame {frame}: no colour buffer at any resolution")
+
+
+def trained_scales(ckpt: Path) -> ScaleSpec | None:
+    """``data.scale`` of the run that wrote the checkpoint (``<run>/.hydra/config.yaml``, where
+    :func:`wdss.checkpoint.training_preprocessing` finds the run's preprocessing), or None where it is unknown."""
+    config = ckpt.resolve().parent.parent / ".hydra" / "config.yaml"
+    if not config.is_file():
+        return None
+    try:
+        node = OmegaConf.select(OmegaConf.load(config), "data.scale")  # ${scale.train}, resolved
+        if OmegaConf.is_config(node):
+            node = OmegaConf.to_container(node, resolve=True)
+        return None if node is None else parse_scale(node)
+    except Exception:  # a config of another version: no warning rather than no upscale
+        return None
+
+
+def scale_warning(scale: float, trained: ScaleSpec | None) -> str | None:
+    """Why ``scale`` is outside the scales the model was trained at (its output there was never trained for, nor
+    tested), or None."""
+    if trained is None:
+        return None
+    if isinstance(trained, dict):
+        choices = trained["choices"]
+        inside, said = any(abs(scale - s) < 1e-6 for s in choices), ", ".join(f"{s:g}x" for s in choices)
+    elif isinstance(trained, tuple):
+        inside, said = trained[0] - 1e-6 <= scale <= trained[1] + 1e-6, f"{trained[0]:g}x to {trained[1]:g}x"
+    else:
+        inside, said = abs(scale - trained) < 1e-6, f"{trained:g}x only"
+    if inside:
+        return None
+    return f"scale {scale:g}x is outside the scales the model was trained at ({said}): going on, expect artefacts"
 
 
 def _digest(path: Path) -> str:
@@ -123,6 +157,7 @@ class Record:
         self.identity = identity
         self.frames: dict[str, dict[str, float]] = {}
         self.skipped: dict[str, str] = {}
+        self.warnings: list[str] = []
         if self.path.exists():
             old = json.loads(self.path.read_text())
             old = {"precision": "float32", **old}  # a folder from before the option ran in float32
@@ -136,7 +171,8 @@ class Record:
     def save(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps({**self.identity, "frames": self.frames, "skipped": self.skipped}, indent=1))
+        record = {**self.identity, "frames": self.frames, "skipped": self.skipped, "warnings": self.warnings}
+        tmp.write_text(json.dumps(record, indent=1))
         os.replace(tmp, self.path)
 
 
@@ -165,17 +201,21 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
     net = module.net
     if getattr(net, "fixed_scale", False) and scale != float(net.scale):
         raise UpscaleError(f"the model ({net.__class__.__name__}) upsamples by {net.scale} only, not by {scale:g}")
+    warning = scale_warning(scale, trained_scales(ckpt))
+    if warning:
+        print(f"wdss.upscale: WARNING: {warning}", file=sys.stderr, flush=True)
     overrides = OmegaConf.to_container(cfg.preprocessing, resolve=True) if cfg.get("preprocessing") else {}
     prep = Preprocessing(**{**training_preprocessing(ckpt), **overrides})
     hr_color = seq.has("color", seq.hr)
     has_target = bool(cfg.metrics) and hr_color
+    shows_target = hr_color and bool(cfg.metrics or cfg.compare)  # read: for the metrics, or shown beside them
     # The history a temporal model gets: its own previous output (recurrent; also a gt_history model on frames
     # without HR colour, as an engine runs it), or the previous HR frame read from the input (gt_history).
     feed_back = module.temporal == "recurrent" or (module.temporal == "gt_history" and not hr_color)
     keys = set(module.inputs)
     if feed_back:
         keys = (keys - {"history"}) | {"motion"}
-    if not has_target:
+    if not shows_target:
         keys.discard("target")
     if cfg.compare:
         keys |= {"lr", "brdf", "emission"}  # bilinear_demodulated beside the prediction
@@ -194,6 +234,9 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
             "precision": str(cfg.precision),
         },
     )
+    record.warnings = [warning] if warning else []
+    if record.warnings:  # recorded even when every frame is already done
+        record.save()
     baseline = Upsample("bilinear", demodulated=True)
 
     def files(frame: int) -> list[Path]:
@@ -226,7 +269,8 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
         f"wdss.upscale: {seq.name} ({seq.layout.name} layout, {len(dataset)} frames) at {scale:g}x with {ckpt}: "
         f"LR {f'from the native {lr_height}P folder' if lr_height else f'point-sampled from {seq.hr}P'}, "
         f"history {'fed back from the output' if feed_back else 'from the input' if 'history' in keys else 'none'}, "
-        f"{'metrics against the HR colour' if has_target else 'no target'} -> {out_dir}",
+        f"{'metrics against the HR colour' if has_target else 'target shown' if shows_target else 'no target'}"
+        f" -> {out_dir}",
         flush=True,
     )
     if done:
@@ -258,13 +302,11 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
             color = out.get("color")
             if color is None:
                 raise UpscaleError(f"{net.__class__.__name__} outputs a display image, no linear HDR colour to write")
-            reference = batch["target"] if has_target else color  # the display exposure, when it is "auto"
+            reference = batch.get("target", color)  # the display exposure, when it is "auto"
             _save_png(files(frame)[1], _to_uint8(module.tone(color.float(), reference.float())))
             if cfg.compare:
                 base = prediction_color(baseline(brdf=batch["brdf"], lr=batch["lr"])["irradiance"], batch)
-                tiles = [module.tone(x.float(), reference.float()) for x in (base, color)]
-                panel = labelled(_to_uint8(torch.cat(tiles, dim=-1)), ("bilinear_demodulated", "prediction"))
-                _save_png(files(frame)[2], panel)
+                _save_png(files(frame)[2], _comparison(module, base, color, batch.get("target")))
             text = f"frame {frame:04d}"
             if has_target:
                 values = {k: float(v[0]) for k, v in module.metrics(color.float(), batch["target"].float()).items()}
@@ -279,6 +321,17 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
     if cfg.video:
         _video(out_dir, seq, scale, [files(f)[-1] for _, f in dataset.items if complete(f)], cfg.fps)
     return _summary(record, seq, scale, out_dir, [f for _, f in dataset.items])
+
+
+def _comparison(module: SuperResolutionModule, base: Tensor, color: Tensor, target: Tensor | None) -> np.ndarray:
+    """The labelled ``compare/<frame>.png``: baseline | prediction, and with a target | target | error x4 as the
+    eval videos show them (:func:`wdss.model.module.comparison_panel`, the baseline in the LR tile's place: at HR
+    already, its nearest upsampling leaves it as it is)."""
+    if target is None:
+        tiles = [module.tone(x.float(), color.float()) for x in (base, color)]
+        return labelled(_to_uint8(torch.cat(tiles, dim=-1)), ("bilinear_demodulated", "prediction"))
+    panel = comparison_panel({"target": target, "lr_color": base}, {"color": color}, module.tone)
+    return labelled(panel, ("bilinear_demodulated", *LABELS[1:]))
 
 
 def _video(out_dir: Path, seq: Sequence, scale: float, pictures: list[Path], fps: float | None) -> None:
@@ -296,7 +349,8 @@ def _video(out_dir: Path, seq: Sequence, scale: float, pictures: list[Path], fps
     finally:
         writer.close()
     os.replace(tmp, path)
-    print(f"  video: {path} ({writer.frames} frames)", flush=True)
+    looped = f", played {writer.loops} times to last {writer.min_seconds:g} s" if writer.loops > 1 else ""
+    print(f"  video: {path} ({writer.frames} frames{looped})", flush=True)
 
 
 def _summary(record: Record, seq: Sequence, scale: float, out_dir: Path, frames: list[int]) -> dict[str, float]:

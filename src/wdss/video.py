@@ -6,10 +6,15 @@ them (:func:`wdss.model.module.comparison_panel`), labelled, at the sequence's f
 (which ships its own FFmpeg); and ``<sequence>_<s>x_crop.gif``: the same four tiles cropped to the centre
 square that the report's qualitative figure shows, enlarged, which the MLflow UI shows inline. Both are logged as
 artifacts of the run under ``videos/``.
+
+A short sequence plays too fast to watch (13 frames at 30 fps: 0.43 s), so every MP4 (:class:`Mp4Writer`, also
+``wdss.upscale``'s) keeps the true frame rate and repeats the whole sequence until it lasts at least
+:data:`MIN_SECONDS` (:func:`loops`); the GIF loops by itself.
 """
 
 from __future__ import annotations
 
+import math
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -20,10 +25,26 @@ from torch import Tensor
 
 from wdss.data.layouts import DEFAULT_FRAME_RATE
 
-__all__ = ["CROP", "LABELS", "Mp4Writer", "SequenceVideos", "centre_box", "labelled", "write_gif"]
+__all__ = [
+    "CROP",
+    "LABELS",
+    "MIN_SECONDS",
+    "Mp4Writer",
+    "SequenceVideos",
+    "centre_box",
+    "labelled",
+    "loops",
+    "write_gif",
+]
 
 LABELS = ("LR (nearest)", "prediction", "target", "error x4")
 CROP = 96  # side of the centre crop (high-resolution pixels), also the report's qualitative figure's
+MIN_SECONDS = 3.0  # an MP4 shorter than this repeats its sequence until it lasts this long
+
+
+def loops(frames: int, fps: float, min_seconds: float = MIN_SECONDS) -> int:
+    """How many times a sequence of ``frames`` plays, whole, in a video that lasts at least ``min_seconds``."""
+    return max(1, math.ceil(min_seconds * fps / frames)) if frames else 1
 
 
 def centre_box(height: int, width: int, size: int = CROP) -> tuple[int, int, int]:
@@ -48,17 +69,30 @@ def labelled(panel: np.ndarray, labels: tuple[str, ...] = LABELS, strip: int = 1
 
 class Mp4Writer:
     """An H.264 MP4 (yuv420p, CRF 18) written frame by frame; odd sizes gain a copy of the last row or column
-    (4:2:0 chroma needs even sizes)."""
+    (4:2:0 chroma needs even sizes).
 
-    def __init__(self, path: str | Path, fps: float) -> None:
+    A sequence shorter than ``min_seconds`` plays :func:`loops` times: its encoded packets are kept (a few MB, never
+    the frames) and muxed again at ``close``, shifted in time, each copy starting on the sequence's keyframe.
+    """
+
+    def __init__(self, path: str | Path, fps: float, min_seconds: float = MIN_SECONDS) -> None:
         import av
 
         self.path = Path(path)
         self._container = av.open(str(self.path), mode="w")
-        self._stream = self._container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
+        self._rate = Fraction(fps).limit_denominator(1001)
+        self._stream = self._container.add_stream("libx264", rate=self._rate)
         self._stream.pix_fmt = "yuv420p"
         self._stream.options = {"crf": "18"}
-        self.frames = 0
+        self.min_seconds = min_seconds
+        self.frames = 0  # of the sequence, once
+        self.loops = 1  # how many times it plays, known at close
+        self._packets: list[tuple[bytes, int, int, bool, Fraction]] | None = [] if min_seconds > 0 else None
+
+    def _mux(self, packets: list[Any]) -> None:
+        if self._packets is not None:  # copied first: muxing takes the packet's data
+            self._packets += [(bytes(p), p.pts, p.dts, p.is_keyframe, p.time_base) for p in packets]
+        self._container.mux(packets)
 
     def write(self, rgb: np.ndarray) -> None:
         import av
@@ -68,11 +102,25 @@ class Mp4Writer:
         if self.frames == 0:
             self._stream.height, self._stream.width = rgb.shape[:2]
         frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
-        self._container.mux(self._stream.encode(frame))
+        self._mux(self._stream.encode(frame))
         self.frames += 1
+        if self.frames >= self.min_seconds * self._rate:  # long enough as it is: nothing to repeat
+            self._packets = None
 
     def close(self) -> None:
-        self._container.mux(self._stream.encode())  # flush the encoder's delayed frames
+        import av
+
+        self._mux(self._stream.encode())  # flush the encoder's delayed frames
+        if self._packets:
+            self.loops = loops(self.frames, self._rate, self.min_seconds)
+            for copy in range(1, self.loops):
+                for data, pts, dts, keyframe, time_base in self._packets:
+                    shift = round(copy * self.frames / self._rate / time_base)  # the sequence's length, in ticks
+                    packet = av.Packet(data)
+                    packet.pts, packet.dts, packet.time_base = pts + shift, dts + shift, time_base
+                    packet.is_keyframe, packet.stream = keyframe, self._stream
+                    self._container.mux(packet)
+        self._packets = None
         self._container.close()
 
 
