@@ -114,3 +114,30 @@ def test_under_an_entry_point_what_is_printed_reaches_the_log_file_and_the_conso
     finally:
         logging.getLogger().removeHandler(handler)
         handler.close()
+
+
+def test_lightnings_chatter_is_dropped_and_its_warnings_pass(caplog, recwarn):
+    """The advertisement, the absent accelerators and the limits of 1.0 go; a warning from the same logger stays."""
+    from lightning.pytorch.utilities.rank_zero import rank_zero_info, rank_zero_warn
+
+    from wdss.progress_bar import model_line, quiet_lightning
+
+    quiet_lightning()
+    quiet_lightning()  # twice: one filter
+    log = logging.getLogger("lightning.pytorch.utilities.rank_zero")
+    assert sum(type(f).__name__ == "_Chatter" for f in log.filters) == 1
+    with caplog.at_level(logging.INFO, logger="lightning.pytorch.utilities.rank_zero"):
+        rank_zero_info("💡 Tip: For seamless cloud logging, try installing litlogger")
+        rank_zero_info("GPU available: False, used: False")
+        rank_zero_info("`Trainer(limit_train_batches=1.0)` was configured so 100% of the batches will be used..")
+        rank_zero_info("Restoring states from the checkpoint path at x.ckpt")
+    assert "Tip" not in caplog.text and "GPU available" not in caplog.text and "limit_train" not in caplog.text
+    assert "Restoring states" in caplog.text
+    import warnings
+
+    warnings.warn("`isinstance(treespec, LeafSpec)` is deprecated, use `isinstance(treespec, TreeSpec)`", stacklevel=1)
+    rank_zero_warn("a real problem")
+    assert [str(w.message) for w in recwarn] == ["a real problem"]
+    net = torch.nn.Linear(3, 2)
+    net.bias.requires_grad_(False)
+    assert model_line(net) == "model: Linear, 8 parameters (6 trainable)"

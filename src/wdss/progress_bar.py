@@ -8,8 +8,10 @@ terminal's rich bar, :class:`LogLines` writes the same lines to the log file onl
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
+import warnings
 from typing import Any
 
 from lightning.pytorch.callbacks import Callback, ProgressBar
@@ -17,7 +19,7 @@ from lightning.pytorch.callbacks import Callback, ProgressBar
 from wdss.logfile import console, to_log_file
 from wdss.progress import duration
 
-__all__ = ["LineProgressBar", "LogLines", "progress_bar", "progress_callbacks"]
+__all__ = ["LineProgressBar", "LogLines", "model_line", "progress_bar", "progress_callbacks", "quiet_lightning"]
 
 
 def progress_bar(*, multirun: bool = False) -> Callback:
@@ -31,8 +33,36 @@ def progress_bar(*, multirun: bool = False) -> Callback:
     return LineProgressBar()
 
 
+# Lightning's info lines that say nothing about this run: advertisements, the absent accelerators, limits of 1.0.
+_CHATTER = ("💡 Tip:", "GPU available:", "TPU available:", "HPU available:", "`Trainer(limit_")
+
+
+class _Chatter(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.getMessage()).startswith(_CHATTER)
+
+
+def quiet_lightning() -> None:
+    """Drop Lightning's chatter (:data:`_CHATTER`) and the deprecation warning its pytree helper raises under this
+    torch on every fit; warnings and errors pass. Idempotent."""
+    log = logging.getLogger("lightning.pytorch.utilities.rank_zero")
+    if not any(isinstance(f, _Chatter) for f in log.filters):
+        log.addFilter(_Chatter())
+    warnings.filterwarnings("ignore", message=r".*isinstance\(treespec, LeafSpec\)` is deprecated")
+
+
+def model_line(module: Any) -> str:
+    """One line in place of Lightning's model summary table (whose FLOPs column reads 0 without an example input)."""
+    net = getattr(module, "net", module)
+    total = sum(p.numel() for p in net.parameters())
+    trainable = sum(p.numel() for p in net.parameters() if p.requires_grad)
+    return f"model: {type(net).__name__}, {total:,} parameters ({trainable:,} trainable)"
+
+
 def progress_callbacks(*, multirun: bool = False) -> list[Callback]:
-    """:func:`progress_bar`, and beside a rich bar :class:`LogLines`: the run's log file gets the plain lines."""
+    """:func:`progress_bar`, and beside a rich bar :class:`LogLines`: the run's log file gets the plain lines.
+    Lightning's chatter is dropped from then on (:func:`quiet_lightning`)."""
+    quiet_lightning()
     bar = progress_bar(multirun=multirun)
     return [bar] if isinstance(bar, LineProgressBar) else [bar, LogLines()]
 

@@ -29,7 +29,7 @@ from wdss.distributed import use_rank_command
 from wdss.errors import ConfigError, entry_point
 from wdss.logfile import log_exception, log_files_to_mlflow
 from wdss.paths import CONF_DIR
-from wdss.progress_bar import progress_callbacks
+from wdss.progress_bar import model_line, progress_callbacks
 from wdss.targets import TargetRefused, check_targets, instantiate
 from wdss.tracking import (
     RUN_ID_FILE,
@@ -212,7 +212,12 @@ def train(cfg: DictConfig) -> dict[str, float]:
     # which rank this is, so it comes first: only rank 0 touches MLflow and writes the run's records.
     use_rank_command("wdss.train")
     # No autologged hyper-parameters: the module's would repeat the config (run_params says what matters).
-    trainer = instantiate(cfg.trainer, logger=False, callbacks=callbacks, enable_autolog_hparams=False)
+    # No model summary table either: one line says what it had to say (model_line).
+    trainer = instantiate(
+        cfg.trainer, logger=False, callbacks=callbacks, enable_autolog_hparams=False, enable_model_summary=False
+    )
+    if trainer.is_global_zero:
+        print(model_line(module), flush=True)
     if cfg.get("video") and cfg.get("test") and trainer.world_size > 1:
         raise ConfigError(
             "video=true needs one process (under DDP each rank tests a share of the frames): test the checkpoint "
