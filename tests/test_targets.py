@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import lightning
@@ -12,9 +13,10 @@ from omegaconf import OmegaConf
 
 from tests.test_train import compose_train
 from wdss.checkpoint import CheckpointError, read_checkpoint
+from wdss.errors import check_built
 from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR, PROJECT_ROOT
-from wdss.targets import TargetRefused, check_targets, instantiate
+from wdss.targets import InterpolationRefused, TargetRefused, check_targets, instantiate
 
 YAML_FILES = sorted(CONF_DIR.rglob("*.yaml")) + sorted((PROJECT_ROOT / "sweeps").glob("*.yaml"))
 
@@ -29,10 +31,119 @@ def _named_targets(node) -> list[str]:
     return []
 
 
+def _package(path: Path) -> str:
+    """The key a config file's nodes land at: its group's folder (conf/model -> model), or ``# @package``."""
+    header = re.search(r"^# @package (\S+)", path.read_text(), re.MULTILINE)
+    if header:
+        return "" if header.group(1) == "_global_" else header.group(1)
+    root = CONF_DIR if path.is_relative_to(CONF_DIR) else path.parent
+    group = path.parent.relative_to(root).parts
+    return "" if group in ((), ("inference",), ("render",)) else ".".join(group)  # config folders of their own
+
+
+def _uninterpolated(node):
+    """``node`` with its interpolations blanked: a file alone cannot resolve them."""
+    if isinstance(node, dict):
+        return {k: _uninterpolated(v) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_uninterpolated(v) for v in node]
+    return "" if isinstance(node, str) and "${" in node else node
+
+
 @pytest.mark.parametrize("path", YAML_FILES, ids=lambda p: str(p.relative_to(PROJECT_ROOT)))
-def test_every_target_of_wdss_configs_is_allowed(path):
+def test_every_target_of_wdss_configs_is_allowed_in_its_slot(path):
     config = OmegaConf.to_container(OmegaConf.load(path), resolve=False)
-    check_targets(config, path.stem)
+    check_targets(_uninterpolated(config), _package(path))
+
+
+COMMANDS = {  # entry point -> its config folder and name
+    "wdss.train": (CONF_DIR, "train"),
+    "wdss.eval": (CONF_DIR, "eval"),
+    "wdss.upscale": (CONF_DIR / "inference", "upscale"),
+    "wdss.export": (CONF_DIR / "inference", "export"),
+    "wdss.render": (CONF_DIR / "render", "default"),
+}
+OPTIONS = [
+    f"{p.parent.name}={p.stem}"
+    for g in ("variant", "experiment", "model", "callbacks")
+    for p in (CONF_DIR / g).glob("*.yaml")
+]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        [],
+        ["hydra/launcher=parallel"],
+        ["hydra/launcher=slurm"],
+        ["-cd", "sweeps", "-cn", "methods"],
+        *[[o] for o in OPTIONS],
+    ],
+    ids=" ".join,
+)
+def test_every_composed_config_passes_the_check_before_hydra_runs(argv, capsys, monkeypatch):
+    monkeypatch.chdir(PROJECT_ROOT)  # sweeps/ find conf/ relative to the project root
+    check_built("wdss.train", *COMMANDS["wdss.train"], argv)
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        (
+            "+hydra.callbacks.evil={_target_: torch.save, obj: 1, f: PWNED}",
+            r"hydra\.callbacks\.evil\._target_=torch\.save is not on wdss's allowlist for hydra\.callbacks\.evil, "
+            r"which builds a Hydra callback",
+        ),
+        (
+            "+hydra.callbacks.evil={_target_: wdss.render.render_preset, out_dir: PWNED}",
+            r"hydra\.callbacks\.evil\._target_=wdss\.render\.render_preset is not on wdss's allowlist for hydra\.callb",
+        ),
+        (
+            "+hydra.launcher.inner={_target_: torch.save, obj: 1, f: PWNED}",
+            r"hydra\.launcher\.inner\._target_=torch\.save is not on wdss's allowlist: nothing is built at "
+            r"hydra\.launcher\.inner",
+        ),
+        (
+            "+hydra.job_logging.handlers.evil={class: subprocess.Popen, args: [touch, PWNED]}",
+            r"hydra\.job_logging\.handlers\.evil\.class=subprocess\.Popen is not on wdss's allowlist of logging",
+        ),
+        (
+            "hydra: {hydra_logging: {formatters: {evil: {'()': torch.save, obj: 1, f: PWNED}}}}",  # a file: no override
+            r"hydra\.hydra_logging\.formatters\.evil\.\(\)=torch\.save is not on wdss's allowlist of logging",
+        ),
+        (
+            "+hydra.callbacks.evil='${oc.create:{_target_: torch.save, obj: 1, f: PWNED}}'",
+            r"hydra\.callbacks\.evil\._target_=torch\.save is not on",
+        ),
+    ],
+    ids=["callback", "callback-of-another-kind", "launcher", "logging-class", "logging-factory", "interpolated"],
+)
+def test_what_hydra_builds_from_its_own_node_is_checked_before_it_runs(command, override, message, tmp_path, capsys):
+    pwned = tmp_path / "pwned"
+    config_dir, name = COMMANDS[command]
+    argv = [override.replace("PWNED", str(pwned))]
+    if override.startswith("hydra:"):  # a config file over the command's own
+        layer = f"defaults: [{name}, _self_]\n{argv[0][:-1]}, searchpath: ['file://{config_dir}']}}\n"
+        (tmp_path / "layer.yaml").write_text(layer)
+        argv = ["-cd", str(tmp_path), "-cn", "layer"]
+    with pytest.raises(SystemExit) as exit:
+        check_built(command, config_dir, name, argv)
+    assert exit.value.code == 2
+    assert re.match(rf"{command}: {message}", capsys.readouterr().err)
+    assert not pwned.exists()
+
+
+def test_a_sweep_over_what_hydra_builds_is_refused(tmp_path, capsys):
+    sweep = tmp_path / "sweep.yaml"
+    sweep.write_text(
+        "defaults: [train, _self_]\nhydra:\n  searchpath: [file://" + str(CONF_DIR) + "]\n  sweeper:\n    params:\n"
+        "      hydra.job_logging.handlers.console.class: logging.StreamHandler,subprocess.Popen\n"
+    )
+    with pytest.raises(SystemExit):
+        check_built("wdss.train", CONF_DIR, "train", ["-cd", str(tmp_path), "-cn", "sweep", "--multirun"])
+    assert "hydra.sweeper.params sweeps hydra.job_logging.handlers.console.class" in capsys.readouterr().err
 
 
 def test_the_configs_name_targets_at_all():
@@ -72,9 +183,62 @@ def test_instantiate_checks_before_building(tmp_path):
     with pytest.raises(TargetRefused, match="_target_=torch.save"):
         instantiate({"_target_": "torch.save", "obj": 1, "f": str(victim)})
     with pytest.raises(TargetRefused, match="_target_=torch.save"):  # a mapping passed as a kwarg is built too
-        instantiate({"_target_": "torch.optim.SGD", "_partial_": True}, lr={"_target_": "torch.save", "f": "x"})
+        sgd = {"_target_": "torch.optim.SGD", "_partial_": True}
+        instantiate(sgd, at="optimizer", lr={"_target_": "torch.save", "f": "x"})
     assert not victim.exists()
-    assert instantiate({"_target_": "torch.optim.SGD", "_partial_": True, "lr": 0.1}).func is torch.optim.SGD
+    sgd = {"_target_": "torch.optim.SGD", "_partial_": True, "lr": 0.1}
+    assert instantiate(sgd, at="optimizer").func is torch.optim.SGD
+    with pytest.raises(
+        TargetRefused, match=r"^_target_=torch\.optim\.SGD is not on wdss's allowlist: nothing is built"
+    ):
+        instantiate(sgd)  # a plain mapping says where it is built, or nothing is
+
+
+def _interpolated(tmp_path: Path, escaped: bool = False) -> str:
+    """A string that OmegaConf resolves to a node Hydra then builds: ``torch.save`` writing ``pwned``."""
+    text = "${oc.create:{_target_: torch.save, obj: 1, f: '" + str(tmp_path / "pwned") + "'}}"
+    return "\\" + text if escaped else text  # escaped: resolved once to the interpolation itself
+
+
+def test_instantiate_checks_the_config_as_resolved_and_refuses_an_interpolation_left_after(tmp_path):
+    upsample = {"_target_": "wdss.model.baselines.Upsample"}
+    with pytest.raises(TargetRefused, match=r"^net\.mode\._target_=torch\.save is not on wdss's allowlist: nothing"):
+        instantiate({**upsample, "mode": _interpolated(tmp_path)}, at="net")
+    with pytest.raises(InterpolationRefused, match=r"^net\.mode=\$\{oc\.create:.* still holds an interpolation"):
+        instantiate({**upsample, "mode": _interpolated(tmp_path, escaped=True)}, at="net")
+    assert not (tmp_path / "pwned").exists()
+
+
+def test_a_kwarg_is_checked_as_instantiate_resolves_it(tmp_path):
+    """Hydra merges kwargs into the config and resolves them: a run's tags (anyone who logs to the store sets them)
+    passed to the logger would build what an interpolation in them makes."""
+    logger = {"_target_": "lightning.pytorch.loggers.MLFlowLogger", "tracking_uri": f"sqlite:///{tmp_path}/m.db"}
+    with pytest.raises(TargetRefused, match=r"^logger\.tags\.overrides\._target_=torch\.save is not on"):
+        instantiate(logger, at="logger", tags={"overrides": _interpolated(tmp_path)})
+    _no_file_but(tmp_path)
+
+
+@pytest.mark.parametrize(
+    "key, target, kind",
+    [
+        ("net", "wdss.render.render_preset", "network"),
+        ("net", "torch.optim.Adam", "network"),
+        ("optimizer", "wdss.model.network.WDSSNet", "optimizer"),
+        ("data.prepare", "wdss.data.SceneDataModule", "data preparer"),
+        ("callbacks.ema", "lightning.pytorch.Trainer", "callback"),
+        ("hydra.callbacks.x", "lightning.pytorch.callbacks.ModelCheckpoint", "Hydra callback"),
+    ],
+)
+def test_each_slot_builds_only_its_own_kind(key, target, kind):
+    node: dict = {"_target_": target}
+    for part in reversed(key.split(".")):
+        node = {part: node}
+    with pytest.raises(
+        TargetRefused,
+        match=rf"^{re.escape(key)}\._target_={re.escape(target)} is not on wdss's allowlist for "
+        rf"{re.escape(key)}, which builds a {kind} \(",
+    ):
+        check_targets(node)
 
 
 def _payload(tmp_path: Path) -> Path:
@@ -94,19 +258,80 @@ NETS = {
 }
 
 
-def crafted_checkpoint(tmp_path: Path, net: dict) -> Path:
-    """A Lightning checkpoint, loadable weights-only, whose stored network config is ``net``."""
+def crafted_checkpoint(tmp_path: Path, net: dict, **hparams) -> Path:
+    """A Lightning checkpoint, loadable weights-only, whose stored network config is ``net`` (and ``hparams``)."""
     honest = SuperResolutionModule({"_target_": "wdss.model.baselines.Upsample"}, flip=False)
     path = tmp_path / "crafted.ckpt"
     torch.save(
         {
             "pytorch-lightning_version": lightning.__version__,
             "state_dict": honest.state_dict(),
-            "hyper_parameters": {**honest.hparams, "net": net},
+            "hyper_parameters": {**honest.hparams, "net": net, **hparams},
         },
         path,
     )
     return path
+
+
+UPSAMPLE = {"_target_": "wdss.model.baselines.Upsample", "mode": "bilinear"}
+# Checkpoints that pass a walk of their targets as stored: what they build hides in an interpolation, or is
+# allowlisted as a callable of another kind (render_preset renders a dataset with Blender wherever out_dir says).
+CRAFTED = {
+    "interpolated-net": lambda tmp: ({**UPSAMPLE, "mode": _interpolated(tmp)}, {}, r"net\.mode=\$\{oc\.create"),
+    "escaped-net": lambda tmp: ({**UPSAMPLE, "mode": _interpolated(tmp, True)}, {}, r"net\.mode=\\\$\{oc\.create"),
+    "interpolated-optimizer": lambda tmp: (
+        UPSAMPLE,
+        {"optimizer": {"_target_": "torch.optim.Adam", "_partial_": True, "lr": _interpolated(tmp)}},
+        r"optimizer\.lr=\$\{oc\.create",
+    ),
+    "interpolated-loss": lambda tmp: (UPSAMPLE, {"loss_weights": {"l1": _interpolated(tmp)}}, r"loss_weights\.l1="),
+    "another-kind": lambda tmp: (
+        {"_target_": "wdss.render.render_preset", "out_dir": str(tmp / "pwned"), "name": "mini"},
+        {},
+        r"net\._target_=wdss\.render\.render_preset is not on wdss's allowlist for (hyper_parameters\.)?net, which "
+        r"builds a network",
+    ),
+}
+
+
+@pytest.mark.parametrize("crafted", CRAFTED)
+def test_a_checkpoint_that_hides_what_it_builds_is_refused_before_anything_is_built(crafted, tmp_path):
+    net, hparams, message = CRAFTED[crafted](tmp_path)
+    ckpt = crafted_checkpoint(tmp_path, net, **hparams)
+    with pytest.raises(CheckpointError, match=rf"^checkpoint {ckpt}: hyper_parameters\.{message}"):
+        read_checkpoint(ckpt)
+    # The module refuses it too, whatever path loads it (a checkpoint's hyper-parameters are its arguments).
+    with pytest.raises(TargetRefused, match=rf"^{message}"):
+        SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
+    assert not (tmp_path / "pwned").exists()
+
+
+def _no_file_but(tmp_path: Path, *kept: Path) -> None:
+    found = sorted(p for p in tmp_path.rglob("*") if p not in kept)
+    assert not found, found
+
+
+@pytest.mark.parametrize("crafted", ["interpolated-net", "escaped-net", "another-kind"])
+@pytest.mark.parametrize("command", ["eval", "upscale", "export"])
+def test_eval_upscale_and_export_refuse_a_crafted_checkpoint_leaving_no_file(crafted, command, tmp_path, monkeypatch):
+    from tests.test_export import compose_export
+    from tests.test_upscale import FIXTURE, compose_upscale
+    from wdss.eval import evaluate
+    from wdss.export import export
+    from wdss.upscale import upscale
+
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/mlflow.db")
+    net, hparams, message = CRAFTED[crafted](tmp_path)
+    ckpt = crafted_checkpoint(tmp_path, net, **hparams)
+    if command == "eval":
+        cfg = compose_train([f"ckpt_path={ckpt}", "data=fixture"], tmp_path / "eval", name="eval")
+    elif command == "upscale":
+        cfg = compose_upscale(tmp_path, f"ckpt_path={ckpt}", f"input={FIXTURE}", f"output={tmp_path / 'up'}")
+    else:
+        cfg = compose_export(tmp_path, f"ckpt_path={ckpt}", "height=48", "width=96")
+    with pytest.raises(CheckpointError, match=rf"hyper_parameters\.{message}"):
+        {"eval": evaluate, "upscale": upscale, "export": export}[command](cfg)
+    _no_file_but(tmp_path, ckpt)
 
 
 @pytest.mark.parametrize("net", NETS)
@@ -183,3 +408,24 @@ def test_training_from_a_random_file_named_ckpt_fails_before_any_run_exists(tmp_
     # Validated before Hydra makes the run's folder (wdss.train.ValidateBeforeRun): nothing is left behind.
     assert not (tmp_path / "outputs").exists(), sorted(p.name for p in (tmp_path / "outputs").rglob("*"))
     assert not (tmp_path / "mlflow.db").exists()
+
+
+def test_a_checkpoint_with_arguments_under_lightnings_older_keys_is_refused(tmp_path):
+    """Lightning merges ``hparams`` (and ``module_arguments``) into the model's arguments too."""
+    ckpt = crafted_checkpoint(tmp_path, UPSAMPLE)
+    checkpoint = torch.load(ckpt, weights_only=True)
+    torch.save({**checkpoint, "hparams": {"lpips": {"backbone": "/etc/passwd", "linear": "/etc/passwd"}}}, ckpt)
+    with pytest.raises(CheckpointError, match=rf"^checkpoint {ckpt} holds 'hparams', which wdss.train never writes"):
+        read_checkpoint(ckpt)
+
+
+@pytest.mark.slow
+def test_python_m_wdss_eval_refuses_a_hydra_callback_off_the_list_before_hydra_builds_it(tmp_path):
+    from tests.test_train import run_module
+
+    ckpt = crafted_checkpoint(tmp_path, UPSAMPLE)
+    evil = f"+hydra.callbacks.evil={{_target_: torch.save, obj: 1, f: {tmp_path / 'pwned'}}}"
+    done = run_module(tmp_path, "wdss.eval", f"ckpt_path={ckpt}", evil, f"paths.log_dir={tmp_path}/outputs")
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("wdss.eval: hydra.callbacks.evil._target_=torch.save is not on wdss's allowlist")
+    _no_file_but(tmp_path, ckpt)

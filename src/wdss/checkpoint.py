@@ -1,8 +1,10 @@
 """Checkpoints are data: :func:`read_checkpoint` opens one weights-only and checks it before anything uses it.
 
 A file that is not a checkpoint gets one sentence naming it, never torch's hint to retry with
-``weights_only=False`` (which would run whatever the file holds); a checkpoint whose stored model config names
-a callable outside :data:`wdss.targets.ALLOWED` is refused before any of it is built.
+``weights_only=False`` (which would run whatever the file holds); a checkpoint whose stored model config holds an
+interpolation (``${oc.create:{_target_: ...}}`` builds whatever it names once resolved), or names a callable
+outside its slot's allowlist (:mod:`wdss.targets`), is refused before any of it is built. The same holds for what
+is read from the run folder beside it (``.hydra/config.yaml``'s ``data.preprocessing``).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import torch
 from omegaconf import OmegaConf
 
 from wdss.errors import UserError
-from wdss.targets import TargetRefused, check_targets
+from wdss.targets import TargetRefused, check_targets, refuse_interpolation
 
 __all__ = ["CheckpointError", "read_checkpoint", "training_preprocessing"]
 
@@ -53,7 +55,12 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     hparams = checkpoint.get("hyper_parameters") if isinstance(checkpoint, dict) else None
     if not isinstance(hparams, dict) or "state_dict" not in checkpoint or "net" not in hparams:
         raise CheckpointError(f"{path} is not a checkpoint written by wdss.train (no state_dict and model config)")
+    # Lightning passes these to the model too (arguments of old checkpoints, or all of them under one name).
+    for key in ("hparams", "module_arguments", "hparams_name"):
+        if checkpoint.get(key) is not None:
+            raise CheckpointError(f"checkpoint {path} holds {key!r}, which wdss.train never writes: refused")
     try:
+        refuse_interpolation(hparams, "hyper_parameters")  # nothing in a checkpoint is resolved
         check_targets(hparams, "hyper_parameters")
     except TargetRefused as err:
         raise CheckpointError(f"checkpoint {path}: {err}") from err
@@ -67,10 +74,16 @@ def training_preprocessing(path: str | Path) -> dict[str, Any]:
     config = Path(path).resolve().parent.parent / ".hydra" / "config.yaml"
     if not config.is_file():
         return {}
-    node = OmegaConf.select(OmegaConf.load(config), "data.preprocessing")
-    if node is None:
+    data = OmegaConf.to_container(OmegaConf.load(config), resolve=False).get("data")  # nothing resolved yet
+    prep = data.get("preprocessing") if isinstance(data, dict) else data
+    if prep is None:
         return {}
-    prep = dict(OmegaConf.to_container(node, resolve=True))
+    try:  # wdss writes plain values here: an interpolation would resolve (and build) whatever it says
+        refuse_interpolation(prep, "data.preprocessing" if isinstance(data, dict) else "data")
+    except TargetRefused as err:
+        raise CheckpointError(f"{config} (the run of checkpoint {path}): {err}") from err
+    if not isinstance(prep, dict) or not all(v is None or isinstance(v, str | int | float) for v in prep.values()):
+        raise CheckpointError(f"{config}: data.preprocessing is not a mapping of plain values: refused")
     # Runs from before the knee existed demodulated with the hard switch: their models expect exactly that.
     prep.setdefault("brdf_knee", 0.0)
     return prep

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import difflib
 import functools
+import inspect
 import logging
+import os
 import shutil
 import sys
 from collections.abc import Callable, Sequence
@@ -25,7 +27,7 @@ from typing import Any, TypeVar
 
 from wdss.logfile import log_exception, teed_output, to_log_file
 
-__all__ = ["ConfigError", "UserError", "check_overrides", "entry_point", "one_line_errors"]
+__all__ = ["ConfigError", "UserError", "check_built", "check_overrides", "entry_point", "one_line_errors"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -167,9 +169,67 @@ def check_overrides(command: str, config_dir: str | Path, config_name: str, argv
         return
 
 
+# What Hydra builds from its own node: from the config before the sweep, or (logging) per job, unchecked there.
+_HYDRA_BUILT = ("hydra.callbacks", "hydra.launcher", "hydra.sweeper", "hydra.job_logging", "hydra.hydra_logging")
+
+
+def check_built(
+    command: str, config_dir: str | Path, config_name: str, argv: Sequence[str], task_file: str | None = None
+) -> None:
+    """Compose the config as Hydra will (its own parser: ``-cd``, ``-cn``, ``--multirun``), with its ``hydra``
+    node, and answer anything that Hydra or wdss would build outside its slot's allowlist
+    (:func:`wdss.targets.check_config`: hydra.callbacks, launcher, sweeper and logging classes too) with one line
+    naming the key, exit status 2: Hydra builds its callbacks and logging before any task code runs. A command
+    line Hydra cannot parse or compose is left to Hydra, which reports it."""
+    from hydra._internal.hydra import Hydra
+    from hydra._internal.utils import create_automatic_config_search_path, get_args_parser
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    from wdss.targets import TargetRefused, check_config
+
+    if GlobalHydra.instance().is_initialized():
+        return  # inside a Hydra app (a test or a notebook that composed already)
+    try:
+        args = get_args_parser().parse_args(list(argv))
+    except SystemExit:
+        return
+    if args.help or args.hydra_help or args.shell_completion:
+        return
+    config_path = str(config_dir)
+    if args.config_path is not None:  # as Hydra takes it: relative to the entry point's file
+        config_path = os.path.join(os.path.dirname(task_file or sys.argv[0]), args.config_path)
+    search_path = create_automatic_config_search_path(None, None, os.path.abspath(config_path))
+    if args.config_dir is not None:
+        from hydra.core.config_search_path import SearchPathQuery
+
+        search_path.prepend("command-line", f"file://{os.path.abspath(args.config_dir)}", SearchPathQuery("schema"))
+    try:
+        hydra = Hydra.create_main_hydra2(task_name=command, config_search_path=search_path)
+        # Multirun: a sweep's values are the jobs' (each job's task checks its own config), the rest applies now.
+        cfg = hydra.compose_config(args.config_name or config_name, args.overrides, run_mode=RunMode.MULTIRUN)
+    except Exception:  # noqa: BLE001 - Hydra reports it, with its own message
+        return
+    finally:
+        GlobalHydra.instance().clear()
+    # Hydra refuses a command line's sweep over its own nodes, not one in hydra.sweeper.params.
+    for key in (str(k).lstrip("+~") for k in OmegaConf.select(cfg, "hydra.sweeper.params") or {}):
+        if any(f"{key}.".startswith(f"{built}.") for built in _HYDRA_BUILT):
+            print(f"{command}: hydra.sweeper.params sweeps {key}, which Hydra builds: set it once", file=sys.stderr)
+            raise SystemExit(2)
+    try:
+        check_config(cfg)
+    except TargetRefused as err:
+        print(f"{command}: {err}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+
+
 def entry_point(command: str, config_dir: str | Path, config_name: str) -> Callable[[F], Callable[..., Any]]:
     """``@hydra.main`` for a ``python -m wdss.*`` command: a mistyped key is one line with the closest keys
-    (:func:`check_overrides`), and a :class:`UserError` is one line and exit status 2 (:func:`one_line_errors`)."""
+    (:func:`check_overrides`), a target off its slot's allowlist, the ``hydra`` node's included, is refused before
+    Hydra builds anything (:func:`check_built`), and a :class:`UserError` is one line and exit status 2
+    (:func:`one_line_errors`)."""
     import hydra
 
     def wrap(task: F) -> Callable[..., Any]:
@@ -181,6 +241,7 @@ def entry_point(command: str, config_dir: str | Path, config_name: str) -> Calla
         def main(cfg_passthrough: Any = None) -> Any:
             if cfg_passthrough is None:
                 check_overrides(command, config_dir, config_name, sys.argv[1:])
+                check_built(command, config_dir, config_name, sys.argv[1:], inspect.getfile(task))
             return hydra_main(cfg_passthrough)
 
         return main

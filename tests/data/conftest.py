@@ -13,9 +13,9 @@ def opened(monkeypatch) -> list[str]:
     names: list[str] = []
     original = Source.read
 
-    def counting(self, name, channels):
+    def counting(self, name, channels, **options):
         names.append(name)
-        return original(self, name, channels)
+        return original(self, name, channels, **options)
 
     monkeypatch.setattr(Source, "read", counting)
     return names

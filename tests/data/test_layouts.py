@@ -252,3 +252,43 @@ def test_the_frame_rate_comes_from_sequence_json_else_the_default(tmp_path):
     meta = json.loads((seq_dir / "sequence.json").read_text())
     (seq_dir / "sequence.json").write_text(json.dumps({**meta, "fps": 59.94}))
     assert Sequence(seq_dir).frame_rate == 59.94
+
+
+def _claim_size(path: Path, height: int, width: int) -> None:
+    """Rewrite an EXR's header to claim ``height`` x ``width`` pixels (its pixel data stays what it was)."""
+    data = bytearray(path.read_bytes())
+    at = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
+    data[at : at + 16] = np.array([0, 0, width - 1, height - 1], "<i4").tobytes()
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("zipped", [False, True])
+def test_a_header_claiming_another_size_is_refused_before_its_pixels_are_decoded(tmp_path, monkeypatch, zipped):
+    """A 23 KB file claiming 60000x60000 would have the decoder allocate ~27 GB: its header is compared first."""
+    from wdss.data import exr
+
+    seq_dir = _fixture_copy(tmp_path / "src")
+    _claim_size(seq_dir / "24P" / "PretonemapMetallic.0003.exr", 60000, 60000)
+    seq = Sequence(_zip_of(seq_dir, tmp_path / "fixture_000.zip") if zipped else seq_dir)
+    decoded = []
+    original = exr._open
+    monkeypatch.setattr(
+        exr, "_open", lambda *a, header_only: decoded.append(header_only) or original(*a, header_only=header_only)
+    )
+    with pytest.raises(
+        SceneError,
+        match=r"'fixture_000', frame 3: .*24P/PretonemapMetallic.0003.exr is 60000x60000, but the sequence's first "
+        r"frame at 24P is 48x24",
+    ):
+        seq.read(3, 24, ["color"])
+    assert decoded and all(decoded)  # headers only: no pixel of the file was decoded
+
+
+def test_a_first_frame_whose_header_is_not_as_high_as_its_folder_is_refused(tmp_path):
+    seq_dir = _fixture_copy(tmp_path)
+    _claim_size(seq_dir / "24P" / "PretonemapMetallic.0000.exr", 60000, 60000)
+    message = r"'fixture_000': .*24P/PretonemapMetallic.0000.exr is 60000x60000 by its header, but its folder is 24P"
+    with pytest.raises(SceneError, match=message):
+        Sequence(seq_dir).read(2, 24, ["color"])
+    with pytest.raises(SceneError, match=message):
+        Sequence(seq_dir).shape(24)

@@ -248,3 +248,46 @@ def test_a_zipped_sequence_packs_like_its_folder(tmp_path):
         for height in (16, 8):
             a, b = (s.read(frame, height, ["color", "motion", "depth"]) for s in (folder, zipped))
             assert all(np.array_equal(a[k], b[k]) for k in a)
+
+
+def test_a_source_frame_rerendered_at_the_same_byte_size_makes_the_store_stale(tmp_path):
+    """Sizes and CRC-32 are compared (the README's promise), for a folder as for a zip."""
+    root = tmp_path / "scenes"
+    path = write_sequence(root / "seq", frames=(1, 2), size=(16, 24), scales=(2,))
+    pack(root, verify=0)
+    packed = PackedSequence(root.with_name("scenes.packed") / "seq")
+    assert packed.stale() is None
+    file = path / "16P" / "PretonemapMetallic.0002.exr"
+    data = bytearray(file.read_bytes())
+    data[-1] ^= 0xFF  # the same byte size, other content
+    file.write_bytes(bytes(data))
+    assert packed.stale() == f"{file} changed since it was packed (sizes and CRC-32 compared: its CRC-32 differs)"
+    with pytest.raises(SceneError, match=r"out of date: .*PretonemapMetallic.0002.exr .*its CRC-32 differs"):
+        SceneDataModule(root, {"train": ["seq"]}, ["target"], patch_size=8, format="packed").setup("fit")
+    with pytest.raises(SceneError, match=r"cannot resume packing 'seq' .*: .*its CRC-32 differs"):
+        pack(root, verify=0)
+
+
+def test_a_store_without_checksums_says_it_is_unchecked(tmp_path, capsys):
+    root = tmp_path / "scenes"
+    write_sequence(root / "seq", frames=(1, 2), size=(16, 24), scales=())
+    pack_main([f"root={root}", "codec=none", "verify=0"])
+    assert "codec=none stores no checksum: a byte that changes in" in capsys.readouterr().out
+    folder = root.with_name("scenes.packed") / "seq"
+    packed = PackedSequence(folder)
+    assert not packed.checksummed
+    hr = folder / "16P.bin"
+    buffers = list(packed.index["resolutions"]["16"]["buffers"])
+    before = packed.read_window(2, 16, buffers, None)[0]
+    data = bytearray(hr.read_bytes())
+    record = packed.index["resolutions"]["16"]["packed"]["2"]
+    data[record["offset"] + record["length"] - 2] ^= 0x40  # a bit of the last buffer's last value
+    hr.write_bytes(bytes(data))
+    after = PackedSequence(folder).read_window(2, 16, buffers, None)[0]
+    # Served as it is, no error: what the packer's line and the errors say.
+    assert [b for b in buffers if not np.array_equal(after[b], before[b], equal_nan=True)] == buffers[-1:]
+    hr.write_bytes(bytes(data[:-100]))
+    with pytest.raises(SceneError, match=r"is .* truncated or corrupt \(codec=none stores no checksum: bytes changed"):
+        PackedSequence(folder)
+    write_sequence(tmp_path / "lz4" / "seq", frames=(1,), size=(16, 24), scales=())
+    assert PackedSequence(pack(tmp_path / "lz4", verify=0) / "seq").checksummed

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import struct
 
 import pytest
@@ -106,3 +107,32 @@ def test_a_missing_or_unreadable_gltf_resource_is_named_before_anything_is_writt
     with pytest.raises(ValueError, match=r"render\.scene \(sequence 'b'\): .*scene\.gltf could not be read"):
         render_sequences(tmp_path / "out", sequences, frames=1, resolution=(32, 16), scales=(2,))
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "uri", ["../outside/scene.bin", "../../../../etc/passwd", "/etc/passwd", "tex/../../outside/x.bin", "%2E%2E/x.bin"]
+)
+def test_a_gltf_uri_outside_the_scene_folder_is_refused_naming_it_before_blender_reads_it(tmp_path, uri):
+    scene = tmp_path / "scenes" / "a"
+    scene.mkdir(parents=True)
+    (tmp_path / "scenes" / "outside").mkdir()
+    (tmp_path / "scenes" / "outside" / "scene.bin").write_bytes(b"\0" * 8)
+    (tmp_path / "scenes" / "x.bin").write_bytes(b"\0" * 8)
+    path = scene / "scene.gltf"
+    path.write_text(json.dumps({"asset": {"version": "2.0"}, "buffers": [{"uri": uri, "byteLength": 8}]}))
+    message = rf"render\.scene \(sequence 'a'\): .*scene\.gltf references '{re.escape(uri)}', which lies outside"
+    with pytest.raises(ValueError, match=message):
+        check_scene(path, "auto", "auto", where="sequence 'a'")
+    with pytest.raises(ValueError, match=message):  # checked before the first sequence renders
+        render_sequences(tmp_path / "out", [{"name": "a", "seed": 0, "scene": str(path)}], frames=1, scales=(2,))
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_gltf_resource_linked_from_outside_its_folder_is_refused(tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "secret.bin").write_bytes(b"\0" * 8)
+    (tmp_path / "a" / "mesh.bin").symlink_to(tmp_path / "secret.bin")
+    path = tmp_path / "a" / "scene.gltf"
+    path.write_text(json.dumps({"asset": {"version": "2.0"}, "buffers": [{"uri": "mesh.bin", "byteLength": 8}]}))
+    with pytest.raises(ValueError, match=r"references 'mesh\.bin', which lies outside the scene file's folder"):
+        scene_resources(path)

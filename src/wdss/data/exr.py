@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import io
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -36,13 +36,18 @@ def read_exr(
     *,
     name: str | None = None,
     keep_dtype: bool = False,
+    check_size: Callable[[tuple[int, int]], None] | None = None,
 ) -> dict[str, np.ndarray]:
     """Read the named ``channels`` (all when ``None``) of a one-part EXR as float32 ``(H, W)`` planes.
 
     ``source`` is a path or the file's bytes (e.g. a zip member); ``name`` is what errors call it.
     The File API decodes the whole part; only the requested planes are converted and returned.
     ``keep_dtype``: half channels stay float16 and float channels float32 (the packer stores them bit for bit).
+    ``check_size``: called with the header's ``(H, W)`` before any pixel is decoded, to refuse the file by raising:
+    decoding allocates whatever the header claims (a 23 KB file can claim 60000x60000, ~27 GB).
     """
+    if check_size is not None:
+        check_size(read_exr_size(source, name=name))
     label, part = _open(source, name, header_only=False)
     available = part.channels
     wanted = list(available) if channels is None else list(channels)

@@ -29,7 +29,7 @@ import re
 import zipfile
 import zlib
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -154,13 +154,22 @@ class Source:
         with zipfile.ZipFile(self.path) as archive:
             return self._member(archive, name)
 
-    def read(self, name: str, channels: Iterable[str], *, keep_dtype: bool = False) -> dict[str, np.ndarray]:
+    def read(
+        self,
+        name: str,
+        channels: Iterable[str],
+        *,
+        keep_dtype: bool = False,
+        check_size: Callable[[tuple[int, int]], None] | None = None,
+    ) -> dict[str, np.ndarray]:
+        """The planes of one file (``check_size``: see :func:`wdss.data.exr.read_exr`)."""
         self.opens += 1
+        options = {"name": self.describe(name), "keep_dtype": keep_dtype, "check_size": check_size}
         if self.path.is_dir():
-            return read_exr(self.path / name, channels, name=self.describe(name), keep_dtype=keep_dtype)
+            return read_exr(self.path / name, channels, **options)
         if self._zip is None:
             self._zip = zipfile.ZipFile(self.path)
-        return read_exr(self._member(self._zip, name), channels, name=self.describe(name), keep_dtype=keep_dtype)
+        return read_exr(self._member(self._zip, name), channels, **options)
 
     def size(self, name: str) -> tuple[int, int]:
         """The ``(H, W)`` of one file, from its header (not counted in :attr:`opens`: no pixels are decoded)."""
@@ -419,7 +428,12 @@ class Sequence(SidecarFacts):
         out: dict[str, np.ndarray] = {}
         shapes: dict[str, tuple[int, int]] = {}
         for name, slots in by_file.items():
-            planes = self.source.read(name, [c for _, slot in slots for c in slot.channels])
+            stem = slots[0][1].stem
+            planes = self.source.read(  # a header of another size is refused before its pixels are allocated
+                name,
+                [c for _, slot in slots for c in slot.channels],
+                check_size=lambda size, name=name, stem=stem: self.check_size(frame, height, stem, name, size),
+            )
             for channel, plane in planes.items():
                 bad = ~np.isfinite(plane)
                 if bad.any():
@@ -441,8 +455,6 @@ class Sequence(SidecarFacts):
         if len(set(shapes.values())) > 1:
             sizes = ", ".join(f"{self.source.describe(n)} {s[1]}x{s[0]}" for n, s in shapes.items())
             raise SceneError(f"sequence {self.name!r}, frame {frame}: buffers differ in size at {height}P: {sizes}")
-        for name, slots in by_file.items():
-            self._check_size(frame, height, slots[0][1].stem, name, shapes[name])
         return out
 
     def shape(self, height: int) -> tuple[int, int]:
@@ -452,8 +464,19 @@ class Sequence(SidecarFacts):
             buffer = next((b for b in ("color", "depth", *BUFFERS) if self.has(b, height, frame)), None)
             if buffer is None:
                 raise SceneError(f"sequence {self.name!r}, frame {frame}: no buffer at {height}P")
-            self._shapes[height] = self.source.size(self.file(buffer, height, frame))
+            self._shapes[height] = self._header_size(self.file(buffer, height, frame), height)
         return self._shapes[height]
+
+    def _header_size(self, name: str, height: int) -> tuple[int, int]:
+        """The ``(H, W)`` a file's header claims, once its height is its folder's (``<H>P``): the first frame is
+        what the others are compared with, and no header may claim a size its folder does not name."""
+        size = self.source.size(name)
+        if size[0] != height:
+            raise SceneError(
+                f"sequence {self.name!r}: {self.source.describe(name)} is {size[1]}x{size[0]} by its header, but its "
+                f"folder is {height}P: every file at a resolution is as high as its folder says"
+            )
+        return size
 
     def read_window(
         self,
@@ -479,16 +502,18 @@ class Sequence(SidecarFacts):
             return {k: crop(full[k], window) for k in wanted}, found
         return {k: np.array(crop(full[k], window)) for k in wanted}, found  # a copy: cached frames are read-only
 
-    def _check_size(self, frame: int, height: int, stem: str, name: str, size: tuple[int, int]) -> None:
-        """A file must have the size of the same file of the sequence's first frame at its resolution.
+    def check_size(self, frame: int, height: int, stem: str, name: str, size: tuple[int, int]) -> None:
+        """A file (``size`` from its header, before decoding) must have the size of the same file of the
+        sequence's first frame at its resolution, whose header must give its folder's height.
 
-        Patches and batches of one size would otherwise hide a frame rendered at another resolution.
+        Patches and batches of one size would otherwise hide a frame rendered at another resolution, and decoding
+        allocates whatever a header claims.
         """
         key = (height, stem)
         if key not in self._sizes:
             first = min(f for (h, s, f) in self._index if (h, s) == key)
             reference = self._index[(height, stem, first)]
-            self._sizes[key] = (reference, size if reference == name else self.source.size(reference))
+            self._sizes[key] = (reference, self._header_size(reference, height))
         reference, expected = self._sizes[key]
         if size != expected:
             raise SceneError(

@@ -13,7 +13,8 @@ Options (``key=value``):
 ``layout``     auto | unreal | dfasr
 ``codec``      lz4 (default: ~1.2x the size of zip EXR files, decoded ~2.7x as fast as zstd) | zstd (about the EXR
                files' size) | none (~1.7x the size of zip EXR files, but a patch is one copy out of the memory map:
-               the fastest to read); lz4 and zstd checksum every chunk
+               the fastest to read; unchecked: a byte changed in the store later is read as it is); lz4 and
+               zstd checksum every chunk
 ``level``      compression level (default: lz4 9, its high-compression levels are 3-12; zstd 3)
 ``tile``       tile size in pixels: a patch decodes the tiles it overlaps (default 128 when compressed; 0: whole
                frames, the default without compression)
@@ -100,7 +101,9 @@ def _source_frame(seq: Sequence, frame: int, height: int, buffers: list[str]) ->
         data = seq.source.read_bytes(name)
         sources[name] = {"size": len(data), "crc32": crc32(data)}
         channels = [c for b in names for c in seq.layout.SLOTS[b].channels]
-        planes = read_exr(data, channels, name=seq.source.describe(name), keep_dtype=True)
+        stem = seq.layout.SLOTS[names[0]].stem
+        check = functools.partial(seq.check_size, frame, height, stem, name)  # before its pixels are allocated
+        planes = read_exr(data, channels, name=seq.source.describe(name), keep_dtype=True, check_size=check)
         shapes[name] = next(iter(planes.values())).shape
         for buffer in names:
             stack = [planes[c] for c in seq.layout.SLOTS[buffer].channels]
@@ -396,6 +399,12 @@ def main(argv: Seq[str] | None = None) -> None:
     except (SceneError, ValueError) as err:
         raise SystemExit(f"wdss.data.pack: {err}") from err
     print(f"wdss.data.pack: {options['root']} -> {out}", flush=True)
+    if options.get("codec") == "none":
+        print(
+            f"wdss.data.pack: codec=none stores no checksum: a byte that changes in {out} later is read as it is "
+            "(lz4 and zstd check every chunk as it is read)",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -10,7 +10,8 @@ A packed store holds one folder per sequence, ``<store>/<sequence>/``:
   checksum (a corrupt chunk fails to decode); with ``codec: lz4`` (the default) a chunk is the CRC-32 of the rest
   (4 bytes, little-endian), then an LZ4 block (high compression: ~1.2x the size of zip EXR files, decoded ~2.7x as
   fast as zstd); with ``codec: none`` it is stored as is, and a window of an untiled frame is one strided copy out
-  of the memory map.
+  of the memory map. Such a store is unchecked: a byte that changes in it later is read as it is (only each
+  file's length is compared with the index, at opening); its errors and the packer say so.
 * ``index.json``: format and version, the sequence's name, layout and source, codec and tile size, the sidecar's
   exposure, and per resolution: the file, the frame size, the frames, each buffer's dtype and source channels,
   and per packed frame its record's offset and length, the source files' sizes and CRC-32 (the zip format's
@@ -75,7 +76,8 @@ class PackedSequence(SidecarFacts):
     """One packed sequence (a folder of :mod:`wdss.data.packed`); reads windows of frames as numpy arrays.
 
     Opening checks the index and that every file has the length its index records (a truncated or overwritten
-    file is an error naming it and the sequence); a chunk that does not decode is one when it is read.
+    file is an error naming it and the sequence); a chunk that does not decode is one when it is read. A
+    ``codec=none`` store carries no checksum (:attr:`checksummed` is False): changed bytes are read as they are.
     """
 
     def __init__(self, folder: str | Path) -> None:
@@ -107,6 +109,7 @@ class PackedSequence(SidecarFacts):
                 f"python -m wdss.data.pack again with the same arguments to finish it"
             )
         self.codec: str = index["codec"]
+        self.checksummed = self.codec != "none"  # lz4 and zstd chunks carry one, checked as they are read
         self.tile: int = int(index["tile"])
         self.exposure: float | None = index.get("exposure")
         self._res = {int(h): r for h, r in index["resolutions"].items()}
@@ -125,7 +128,7 @@ class PackedSequence(SidecarFacts):
                 found = "missing" if size is None else f"{size} bytes"
                 raise SceneError(
                     f"packed file {path} of sequence {self.name!r} ({height}P) is {found}, its index records "
-                    f"{expected} bytes: it is truncated or corrupt; {repack_hint(self.folder)}"
+                    f"{expected} bytes: it is truncated or corrupt{self._unchecked()}; {repack_hint(self.folder)}"
                 )
         sidecar = self.folder / "sequence.json"
         self._sidecar = parse_sidecar(sidecar.read_bytes(), str(sidecar)) if sidecar.is_file() else Sidecar({})
@@ -232,9 +235,15 @@ class PackedSequence(SidecarFacts):
     def _corrupt(self, height: int, frame: int, what: str) -> SceneError:
         path = self.folder / self._res[height]["file"]
         return SceneError(
-            f"packed file {path} of sequence {self.name!r} is corrupt: frame {frame}, {what}; "
+            f"packed file {path} of sequence {self.name!r} is corrupt: frame {frame}, {what}{self._unchecked()}; "
             f"{repack_hint(self.folder)}"
         )
+
+    def _unchecked(self) -> str:
+        """What an error about a store without checksums adds: its other bytes were never checked either."""
+        if self.checksummed:
+            return ""
+        return " (codec=none stores no checksum: bytes changed in place, at the same length, are read unnoticed)"
 
     def _decode(self, data: memoryview, size: int) -> bytes | memoryview:
         if self.codec == "none":
@@ -348,17 +357,23 @@ class PackedSequence(SidecarFacts):
 
 
 def changed_source(source: Path, prefix: str, recorded: dict[str, dict]) -> str | None:
-    """The first source file whose size or checksum differs from ``recorded`` (name -> size, crc32), or None.
+    """The first source file whose size or CRC-32 differs from ``recorded`` (name -> size, crc32), or None.
 
-    A zipped source is compared by its central directory (sizes and CRC-32), a folder by file sizes (a stat).
+    Both are compared, for a folder as for a zip: a re-rendered frame often has the same byte size. A zip's are
+    read from its central directory; a folder's files are read whole, once per process while their stat is
+    unchanged (:func:`_file_crc32`).
     """
     if not str(source) or not source.exists():
         return None
     if source.is_dir():
         for name, meta in recorded.items():
             path = source / name
-            if not path.is_file() or path.stat().st_size != meta["size"]:
-                return f"{path} changed since it was packed"
+            if not path.is_file():
+                return f"{path} changed since it was packed (it is gone)"
+            if path.stat().st_size != meta["size"]:
+                return _changed(path, "size")
+            if _file_crc32(path) != meta["crc32"]:
+                return _changed(path, "CRC-32")
         return None
     import zipfile
 
@@ -369,9 +384,31 @@ def changed_source(source: Path, prefix: str, recorded: dict[str, dict]) -> str 
         return f"{source} cannot be read ({err})"
     for name, meta in recorded.items():
         info = infos.get(prefix + name)
-        if info is None or info.file_size != meta["size"] or meta["crc32"] != info.CRC:
-            return f"{source}:{prefix}{name} changed since it was packed"
+        if info is None:
+            return f"{source}:{prefix}{name} changed since it was packed (it is gone)"
+        if info.file_size != meta["size"] or meta["crc32"] != info.CRC:
+            return _changed(f"{source}:{prefix}{name}", "size" if info.file_size != meta["size"] else "CRC-32")
     return None
+
+
+def _changed(where: object, what: str) -> str:
+    return f"{where} changed since it was packed (sizes and CRC-32 compared: its {what} differs)"
+
+
+_CRC32: dict[tuple, int] = {}  # (path, size, mtime, ctime, inode) -> CRC-32: a file read once per process
+
+
+def _file_crc32(path: Path) -> int:
+    """The CRC-32 of a file, as the packer recorded it (:func:`crc32` of its bytes), cached while its stat holds."""
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, stat.st_ctime_ns, stat.st_ino)
+    if key not in _CRC32:
+        value = 0
+        with open(path, "rb") as handle:
+            for block in iter(lambda: handle.read(1 << 22), b""):
+                value = zlib.crc32(block, value)
+        _CRC32[key] = value & 0xFFFFFFFF
+    return _CRC32[key]
 
 
 def lz4_encode(data: bytes, level: int) -> bytes:

@@ -22,7 +22,7 @@ from wdss.data.warp import warp_backward
 from wdss.model.losses import WDSSLoss
 from wdss.model.metrics import LPIPS, ImageMetrics
 from wdss.model.temporal_metrics import TemporalStability
-from wdss.targets import check_targets, instantiate
+from wdss.targets import check_targets, instantiate, refuse_interpolation
 
 __all__ = ["SuperResolutionModule"]
 
@@ -81,10 +81,13 @@ class SuperResolutionModule(L.LightningModule):
         }
         if not isinstance(net, nn.Module):
             hparams["net"] = _plain(net)
-        # A checkpoint's hyper-parameters are data: refuse any target outside the allowlist before building any.
+        # A checkpoint's hyper-parameters are data: a config's interpolations were resolved above (_plain, or by
+        # the instantiate that built this module), so one left is refused, as is a target off its slot's list,
+        # before anything is built.
+        refuse_interpolation(hparams)
         for key in ("net", "optimizer", "scheduler"):
             check_targets(hparams.get(key), key)
-        self.net = net if isinstance(net, nn.Module) else instantiate(hparams["net"])
+        self.net = net if isinstance(net, nn.Module) else instantiate(hparams["net"], at="net")
         if temporal is None:  # follow the network: a temporal branch trains on ground-truth history by default
             temporal = "gt_history" if "history" in getattr(self.net, "inputs", ()) else "none"
             hparams["temporal"] = temporal
@@ -385,10 +388,10 @@ class SuperResolutionModule(L.LightningModule):
     def configure_optimizers(self) -> Any:
         if not self.trainable:
             return None
-        optimizer = instantiate(self.optimizer_config)(self.net.parameters())
+        optimizer = instantiate(self.optimizer_config, at="optimizer")(self.net.parameters())
         if not self.scheduler_config:
             return optimizer
-        scheduler = instantiate(self.scheduler_config)(optimizer)
+        scheduler = instantiate(self.scheduler_config, at="scheduler")(optimizer)
         return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
 
     def optimizer_step(self, epoch: int, batch_idx: int, optimizer: Any, optimizer_closure: Any = None) -> None:

@@ -94,7 +94,11 @@ def _gltf_json(path: Path, where: str) -> dict[str, Any]:
 def scene_resources(path: Path, *, where: str = "render.scene") -> list[tuple[str, Path]]:
     """The external files a glTF (``.gltf``, or a ``.glb`` with external textures) references, as ``(uri,
     path)`` sorted by URI: the URIs of its buffers and images other than ``data:`` URIs, resolved as Blender's
-    importer resolves them (unquoted, relative to the file's folder); none for a ``.blend``."""
+    importer resolves them (unquoted, relative to the file's folder); none for a ``.blend``.
+
+    A URI that leads outside the file's folder (``../``, an absolute path, a link out of it) is refused naming it,
+    before Blender reads anything: a scene file is data, and would otherwise read (and render, and hash into the
+    sidecar) any file its author names."""
     if SCENE_KINDS[path.suffix.lower()] != "gltf":
         return []
     gltf = _gltf_json(path, where)
@@ -105,7 +109,18 @@ def scene_resources(path: Path, *, where: str = "render.scene") -> list[tuple[st
             uri = entry.get("uri") if isinstance(entry, dict) else None
             if isinstance(uri, str) and uri and not uri.startswith("data:"):
                 uris.add(uri)
-    return [(uri, path.parent / os.path.normpath(unquote(uri.replace("\\", "/")))) for uri in sorted(uris)]
+    folder = path.resolve().parent  # what Blender reads the URIs against (check_scene hands it the resolved path)
+    found = []
+    for uri in sorted(uris):
+        relative = unquote(uri.replace("\\", "/"))
+        resource = path.parent / os.path.normpath(relative)
+        if os.path.isabs(relative) or not (folder / relative).resolve().is_relative_to(folder):
+            raise ConfigError(
+                f"{where}: {path} references {uri!r}, which lies outside the scene file's folder {folder}: refused "
+                "(a glTF's buffers and images must lie in its folder or below)"
+            )
+        found.append((uri, resource))
+    return found
 
 
 def _sha256(path: Path) -> str:
