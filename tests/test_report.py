@@ -475,3 +475,18 @@ def test_each_row_is_stated_over_the_learned_kernel_alone_and_the_orderings_at_e
     assert rows["No wavelet"][1].startswith(f"{np.mean([0.2, 0.1, 0.4]) - 1:+.2f} ± ")  # its own 4x offset
     assert "Learned bilateral" not in rows and len(rows) == 2
     assert "The paper's orderings at 2x" in text and "The paper's orderings at 4x" in text
+
+
+def test_a_sweep_tag_that_names_a_path_writes_only_under_out(tmp_path):
+    """The report's folder comes from the parent run's ``sweep`` tag, which anyone who logs to the store sets."""
+    from wdss.report import path_component
+
+    jobs = [({"variant": "swt_db4", "seed": "0"}, {"test/psnr_3x": 30.0}, "FINISHED")]
+    uri = fake_sweep(tmp_path, "../../escaped", jobs)
+    out = report("../../escaped", tracking_uri=uri, out_dir=tmp_path / "reports")
+    assert out.parent == tmp_path / "reports" and out.name == "escaped"
+    assert not (tmp_path.parent / "escaped").exists()
+    assert [path_component(n) for n in ("/etc/x", "..", "ablation_wavelet", "a b")] == ["etc_x", "report"] + [
+        "ablation_wavelet",
+        "a_b",
+    ]

@@ -203,3 +203,30 @@ def test_upscale_in_bfloat16_stays_close_to_float32_and_keeps_its_own_folder(tmp
         upscale(compose_upscale(tmp_path, *args, f"output={tmp_path / 'bf16'}"))
     with pytest.raises(UpscaleError, match="precision must be one of float32, bfloat16, float16, got 'half'"):
         upscale(compose_upscale(tmp_path, *args, "precision=half"))
+
+
+def test_an_output_folder_that_is_holds_or_lies_inside_the_input_is_refused_and_the_input_kept(tmp_path):
+    """output=<the input> would overwrite its ground-truth frames: refused before anything is written."""
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "transform=swt", "basis=haar")
+    source = tmp_path / "shots" / "fixture_000"
+    shutil.copytree(FIXTURE, source)
+    before = {p: p.read_bytes() for p in source.rglob("*") if p.is_file()}
+    for output in (source, source / "up", tmp_path / "shots"):
+        with pytest.raises(UpscaleError, match=r"is, holds or lies inside the input .*choose another output="):
+            upscale(compose_upscale(tmp_path, f"ckpt_path={ckpt}", f"input={source}", f"output={output}"))
+    assert {p: p.read_bytes() for p in source.rglob("*") if p.is_file()} == before
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep")
+    with pytest.raises(UpscaleError, match=r"holds files but no upscale.json: it is not an upscale folder"):
+        upscale(compose_upscale(tmp_path, f"ckpt_path={ckpt}", f"input={source}", f"output={foreign}"))
+    assert [p.name for p in foreign.iterdir()] == ["notes.txt"]
+
+
+def test_a_rerun_with_other_preprocessing_is_refused_rather_than_mixed_into_the_folder(tmp_path):
+    ckpt = tiny_checkpoint(tmp_path / "model.ckpt", "transform=swt", "basis=haar")
+    args = (f"ckpt_path={ckpt}", f"input={FIXTURE}", f"output={tmp_path / 'up'}", "frames=[0,2]")
+    upscale(compose_upscale(tmp_path, *args))
+    upscale(compose_upscale(tmp_path, *args))  # the same again: resumes, nothing to do
+    with pytest.raises(UpscaleError, match=r"holds the frames of another upscale \(preprocessing "):
+        upscale(compose_upscale(tmp_path, *args, "+preprocessing.color_max=4.0"))

@@ -33,6 +33,7 @@ import csv
 import io
 import math
 import os
+import re
 import statistics
 import tempfile
 from collections import Counter, defaultdict
@@ -235,6 +236,13 @@ def check_one_dataset(parent_run, runs: Sequence) -> None:
             f"wdss.report: the runs under {parent_run.info.run_id} read different data ({listed}); they are not "
             f"seeds of one row: python -m wdss.report --runs {ids}"
         )
+
+
+def path_component(name: str) -> str:
+    """``name`` (a sweep's tag, which anyone who logs to the store can set) as one safe folder name: never a path
+    that leaves ``--out`` (``../x``, ``/etc``), never hidden or empty."""
+    safe = re.sub(r"[^\w.+=-]+", "_", name).strip("._")
+    return safe or "report"
 
 
 def interval(values: list[float]) -> tuple[float, float]:
@@ -937,7 +945,7 @@ def report(
         + (f"parent run {parent_run.info.run_id}; " if parent_run is not None else "")
         + "every metric at every scale in table.csv.\n"
     )
-    out = Path(out_dir) / name
+    out = Path(out_dir) / path_component(name)
     out.mkdir(parents=True, exist_ok=True)
     (out / "table.md").write_text(markdown)
     (out / "table.csv").write_text(full_csv(rows, metrics, notes))

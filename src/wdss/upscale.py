@@ -30,6 +30,7 @@ if __name__ == "__main__":
     # faulting it in (wdss.memory). Started again before the heavy imports below, so that this costs little.
     restart_with_retained_memory()
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -152,7 +153,9 @@ class Record:
     A folder made by another checkpoint, input or scale is refused, never mixed into.
     """
 
-    def __init__(self, out_dir: Path, identity: dict[str, Any]) -> None:
+    def __init__(self, out_dir: Path, identity: dict[str, Any], unrecorded: dict[str, Any] | None = None) -> None:
+        """``unrecorded``: what an older record that lacks a key of ``identity`` stands for ("as trained": the
+        identity's own value; None: unknown, so refused)."""
         self.path = out_dir / RECORD
         self.identity = identity
         self.frames: dict[str, dict[str, float]] = {}
@@ -161,6 +164,8 @@ class Record:
         if self.path.exists():
             old = json.loads(self.path.read_text())
             old = {"precision": "float32", **old}  # a folder from before the option ran in float32
+            for key, stands in (unrecorded or {}).items():
+                old.setdefault(key, identity[key] if stands == "as trained" else "not recorded")
             if {k: old.get(k) for k in identity} != identity:
                 differ = ", ".join(f"{k} {old.get(k)!r} (now {v!r})" for k, v in identity.items() if old.get(k) != v)
                 raise UpscaleError(
@@ -174,6 +179,22 @@ class Record:
         record = {**self.identity, "frames": self.frames, "skipped": self.skipped, "warnings": self.warnings}
         tmp.write_text(json.dumps(record, indent=1))
         os.replace(tmp, self.path)
+
+
+def check_output(out_dir: Path, source: Path) -> None:
+    """Refuse an output folder that is, holds or lies inside the input (its frames would be overwritten or read back
+    as input), and an existing folder with files but no upscale record (wdss writes only into its own folders)."""
+    out, inp = out_dir.resolve(), Path(source).resolve()
+    if out == inp or inp in out.parents or out in inp.parents:
+        raise UpscaleError(
+            f"output={out_dir} is, holds or lies inside the input {source}: the upscaled frames would overwrite or "
+            "mix with the input's; choose another output="
+        )
+    if out.is_dir() and not (out / RECORD).exists() and any(out.iterdir()):
+        raise UpscaleError(
+            f"output={out_dir} holds files but no {RECORD}: it is not an upscale folder, and wdss writes only into "
+            "its own; choose an empty or new folder"
+        )
 
 
 def _describe(values: dict[str, float]) -> str:
@@ -225,6 +246,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
     )
     collate = Collate(dataset.keys, prep, scale)
     out_dir = Path(str(cfg.output or Path(str(cfg.paths.log_dir)) / "upscale" / f"{seq.name}_{scale:g}x"))
+    check_output(out_dir, seq.source.path)
     record = Record(
         out_dir,
         {
@@ -232,7 +254,11 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
             "input": str(seq.source.path.resolve()),
             "scale": scale,
             "precision": str(cfg.precision),
+            # Everything that changes a frame is part of the folder's identity: a rerun with other preprocessing
+            # is refused rather than mixed in (folders from before this was recorded: as made without overrides).
+            "preprocessing": json.loads(json.dumps(dataclasses.asdict(prep), default=str)),
         },
+        unrecorded={"preprocessing": None if overrides else "as trained"},
     )
     record.warnings = [warning] if warning else []
     if record.warnings:  # recorded even when every frame is already done
