@@ -245,6 +245,7 @@ def test_resume_from_last_continues_the_same_run(tmp_path, tracking):
     first = compose_train(["experiment=smoke", "transform=dwt", "trainer.max_epochs=1", "test=false"], tmp_path)
     train(first)
     assert (tmp_path / "run" / "checkpoints" / "last.ckpt").exists()
+    assert not (tmp_path / "run" / "training.pid").exists()  # held while it trained, released at its end
     second = compose_train(
         ["experiment=smoke", "transform=dwt", "trainer.max_epochs=2", "test=false", "ckpt_path=last"],
         tmp_path / "again",
@@ -311,6 +312,36 @@ def test_ckpt_path_last_refuses_runs_of_one_name_that_trained_at_the_same_time(t
     with pytest.raises(ConfigError, match="ckpt_path=last is ambiguous: 2 runs of 'experiment=smoke'") as err:
         _resume(cfg)
     assert f"{later} (MLflow run id-b)" in str(err.value) and f"{earlier} (MLflow run id-a)" in str(err.value)
+
+
+def test_ckpt_path_last_refuses_a_run_that_is_still_training_naming_its_pid(tmp_path):
+    """Two processes must never write one MLflow run: the run folder, or a later folder that resumed the same run,
+    holds the pid of the process training it; a lock whose process is gone holds nothing."""
+    import subprocess
+    import sys
+
+    from wdss.train import LOCK_FILE, _resume
+
+    cfg = compose_train(["experiment=smoke", "ckpt_path=last"], tmp_path)
+    last = fake_run(tmp_path, "a", "experiment=smoke", started=1000, checkpointed=1100)
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (last.parent.parent / LOCK_FILE).write_text(str(other.pid))
+        with pytest.raises(
+            ConfigError, match=rf"ckpt_path=last: .* is still training \(pid {other.pid}\) into MLflow run id-a"
+        ):
+            _resume(cfg)
+        (last.parent.parent / LOCK_FILE).unlink()
+        resumed = tmp_path / "runs" / "resumed"  # resumed the same MLflow run, no checkpoint of its own yet
+        resumed.mkdir(parents=True)
+        (resumed / "mlflow_run_id").write_text("id-a")
+        (resumed / LOCK_FILE).write_text(str(other.pid))
+        with pytest.raises(ConfigError, match=rf"resumed is still training \(pid {other.pid}\)"):
+            _resume(cfg)
+    finally:
+        other.kill()
+        other.wait()
+    assert _resume(cfg) == (str(last), "id-a")  # its process has ended: the lock it left holds nothing
 
 
 def test_last_ckpt_is_written_every_epoch_and_when_sigterm_lands_in_validation(tmp_path, tracking, monkeypatch):

@@ -168,8 +168,43 @@ def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
             f"{listing}\nresume one of them with ckpt_path=PATH"
         )
     run_id = _recorded(ckpt.parent.parent, RUN_ID_FILE)
+    # A run still training (in its own folder, or resumed into a later one) keeps its MLflow run: two writers would
+    # interleave their metrics and each end it with its own status.
+    writers = [ckpt.parent.parent] + [
+        f.parent for f in log_dir.glob(f"**/{RUN_ID_FILE}") if run_id and _recorded(f.parent, RUN_ID_FILE) == run_id
+    ]
+    for run_dir in dict.fromkeys(writers):
+        pid = training_pid(run_dir)
+        if pid is not None:
+            raise ConfigError(
+                f"ckpt_path=last: {run_dir} is still training (pid {pid})"
+                + (f" into MLflow run {run_id}" if run_id else "")
+                + "; resuming it now would make two writers of one run: wait for it to end, stop it (kill "
+                f"{pid}), or resume another checkpoint with ckpt_path=PATH"
+            )
     print(f"wdss.train: resuming {ckpt}" + (f" in MLflow run {run_id}" if run_id else ""))
     return str(ckpt), run_id
+
+
+LOCK_FILE = "training.pid"  # in a run's output directory while it trains: whose process writes its MLflow run
+
+
+def training_pid(run_dir: Path) -> int | None:
+    """The pid of another live process training in ``run_dir`` (its :data:`LOCK_FILE`), else None: a lock left by
+    a killed process, or by this one, holds nothing."""
+    try:
+        pid = int((run_dir / LOCK_FILE).read_text().strip())
+    except (OSError, ValueError):
+        return None
+    if pid == os.getpid():
+        return None
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:  # alive, another user's
+        return pid
+    return pid
 
 
 def _key_file(run_dir: Path) -> Path:
@@ -241,6 +276,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
         (output_dir / "run_name").write_text(name)
         (output_dir / RUN_KEY_FILE).write_text(run_key(cfg))
         (output_dir / RUN_ID_FILE).write_text(logger.run_id)
+        (output_dir / LOCK_FILE).write_text(str(os.getpid()))
 
     resolved = OmegaConf.to_container(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]), resolve=True)
     if resume_run is None:  # params are immutable in MLflow: a resumed run keeps those it started with
@@ -282,6 +318,9 @@ def train(cfg: DictConfig) -> dict[str, float]:
         print(f"wdss.train: stopped by {stopped_by.name}; resume with ckpt_path=last (checkpoints in {output_dir})")
         log_files_to_mlflow(experiment, run_id, "wdss.train")
         raise SystemExit(128 + stopped_by) from error
+    finally:
+        if trainer.is_global_zero:
+            (output_dir / LOCK_FILE).unlink(missing_ok=True)
     return metrics
 
 
