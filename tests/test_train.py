@@ -344,6 +344,24 @@ def test_ckpt_path_last_refuses_a_run_that_is_still_training_naming_its_pid(tmp_
     assert _resume(cfg) == (str(last), "id-a")  # its process has ended: the lock it left holds nothing
 
 
+def test_the_test_after_a_resume_loads_only_a_checkpoint_of_its_own_run(tmp_path, capsys):
+    """A resumed callback state names the best checkpoint: it is tested only from a checkpoints folder of the same
+    MLflow run (this folder, or the one it resumed), never another run's file or any other path."""
+    from wdss.train import _own_checkpoint
+
+    cfg = compose_train(["experiment=smoke"], tmp_path)
+    before = fake_run(tmp_path, "a", "experiment=smoke", started=1000, checkpointed=1100)  # MLflow run id-a
+    other = fake_run(tmp_path, "b", "experiment=smoke", started=2000, checkpointed=2100)  # run id-b
+    own = tmp_path / "run" / "checkpoints" / "epoch003.ckpt"
+    assert str(cfg.paths.output_dir) == str(tmp_path / "run")
+    assert _own_checkpoint(str(own), cfg, "id-a") == str(own)
+    assert _own_checkpoint(str(before), cfg, "id-a") == str(before)  # the folder this run resumed
+    assert _own_checkpoint("", cfg, "id-a") == ""
+    for path in (other, Path("/etc/passwd")):
+        assert _own_checkpoint(str(path), cfg, "id-a") == ""
+        assert f"the best checkpoint the state names, {path}, is not one of this run's" in capsys.readouterr().err
+
+
 def test_last_ckpt_is_written_every_epoch_and_when_sigterm_lands_in_validation(tmp_path, tracking, monkeypatch):
     """lr=0: val/psnr never improves after epoch 0, so only an every-epoch last.ckpt can hold epoch 1."""
     import signal

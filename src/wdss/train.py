@@ -186,6 +186,26 @@ def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
     return str(ckpt), run_id
 
 
+def _own_checkpoint(path: str, cfg: DictConfig, run_id: str | None) -> str:
+    """``path`` (the best checkpoint a resumed callback state names) if it lies in a checkpoints folder of this MLflow
+    run (this folder, or one it resumed), else "" with a warning: the test never loads another run's file."""
+    if not path:
+        return ""
+    log_dir = Path(str(cfg.paths.log_dir))
+    folders = {Path(str(cfg.paths.output_dir)).resolve() / "checkpoints"}
+    if run_id:
+        folders |= {
+            f.parent.resolve() / "checkpoints"
+            for f in log_dir.glob(f"**/{RUN_ID_FILE}")
+            if _recorded(f.parent, RUN_ID_FILE) == run_id
+        }
+    if Path(path).resolve().parent in folders:
+        return path
+    print(f"wdss.train: WARNING: the best checkpoint the state names, {path}, is not one of this run's: testing the "
+          "weights as they are", file=sys.stderr, flush=True)  # fmt: skip
+    return ""
+
+
 LOCK_FILE = "training.pid"  # in a run's output directory while it trains: whose process writes its MLflow run
 
 
@@ -297,6 +317,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
             metrics["trainer/global_step"] = float(trainer.global_step)
         if cfg.get("test"):
             best = getattr(trainer.checkpoint_callback, "best_model_path", "") if fitting else ""
+            best = _own_checkpoint(best, cfg, run_id)
             # Lightning's results table is for a terminal: in a log it cuts every cell to fit 80 columns, and the
             # metrics are printed in full when the run ends
             trainer.test(
