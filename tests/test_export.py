@@ -193,3 +193,28 @@ def test_python_m_wdss_export_writes_graph_and_layout_and_checks_them(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     assert (tmp_path / "model_96x48_2x.onnx").is_file() and (tmp_path / "model_96x48_2x.json").is_file()
     assert "onnxruntime (CPU) vs torch on the example inputs" in done.stdout
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        (("height=-216", "width=384"), "height and width must be positive, got height=-216 width=384"),
+        (("scale=0.5",), "scale must be at least 1, got 0.5"),
+        (("dynamic=true", "height=216", "width=384", "scale=3"), "has an LR frame of 128x72"),  # even: passes this
+        (
+            ("dynamic=true", "height=218", "width=384", "scale=2"),
+            r"an LR frame of 192x109; choose another example size",
+        ),
+        (("dynamic=true", "height=24", "width=48", "scale=2"), "at least 16: height=24 width=48"),
+    ],
+)
+def test_a_size_the_graph_cannot_be_traced_at_is_refused_in_one_line_before_anything_is_read(
+    tmp_path, overrides, message
+):
+    cfg = compose_export(tmp_path, f"ckpt_path={tmp_path / 'absent.ckpt'}", *overrides)
+    if "128x72" in message:  # an even LR of 128x72 at 3x: the size check passes, the missing checkpoint is next
+        with pytest.raises(Exception, match="absent.ckpt"):
+            export(cfg)
+        return
+    with pytest.raises(ExportError, match=message):
+        export(cfg)

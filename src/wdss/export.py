@@ -424,15 +424,34 @@ def input_layout(
     }
 
 
+def check_size(height: int, width: int, scale: float, dynamic: bool) -> None:
+    """Refuse, in one line, an output size the graph cannot be traced at (torch would fail deep inside export):
+    not positive, a scale below 1, and with ``dynamic`` an example size whose HR or LR side is odd or under 16 (the
+    dynamic graph holds the even branch, 2 x a dimension of at least 8)."""
+    if height < 1 or width < 1:
+        raise ExportError(f"height and width must be positive, got height={height} width={width}")
+    if not scale >= 1:
+        raise ExportError(f"scale must be at least 1, got {scale:g}")
+    lr_height, lr_width = lr_size(height, width, scale)
+    sides = (height, width, lr_height, lr_width)
+    if dynamic and (any(side % 2 for side in sides) or min(sides) < 16):
+        raise ExportError(
+            f"dynamic=true traces at an example size whose HR and LR sides are even and at least 16: height={height} "
+            f"width={width} at {scale:g}x has an LR frame of {lr_width}x{lr_height}; choose another example size "
+            "(e.g. height=1080 width=1920 scale=2), any even size runs on the graph"
+        )
+
+
 def export(cfg: DictConfig) -> Path:
     """Export the checkpoint of ``cfg.ckpt_path`` as ``cfg.format``; the path of the graph written."""
     if cfg.format != "onnx":
         raise ExportError(f"format must be onnx, got {cfg.format!r}")
+    height, width, scale = int(cfg.height), int(cfg.width), float(cfg.scale)
+    dynamic, fp16 = bool(cfg.dynamic), bool(cfg.fp16)
+    check_size(height, width, scale, dynamic)
     ckpt = Path(str(cfg.ckpt_path))
     read_checkpoint(ckpt)  # a wdss checkpoint whose model config builds only allowlisted callables
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)
-    height, width, scale = int(cfg.height), int(cfg.width), float(cfg.scale)
-    dynamic, fp16 = bool(cfg.dynamic), bool(cfg.fp16)
     if cfg.output:
         path = Path(str(cfg.output))
     else:
