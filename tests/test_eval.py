@@ -40,3 +40,19 @@ def test_eval_of_a_checkpoint_outside_a_run_folder_uses_the_config(tmp_path):
     cfg = _defaults()
     wdss_eval._as_trained(cfg, tmp_path / "model.ckpt")
     assert cfg == _defaults()
+
+
+def test_a_malformed_run_id_beside_a_checkpoint_is_unknown_not_an_abort(tmp_path, capsys):
+    """``mlflow_run_id`` is a file anyone can edit: only an MLflow run id is ever passed to the store."""
+    from wdss.eval import training_run_id
+
+    ckpt = tmp_path / "run" / "checkpoints" / "last.ckpt"
+    ckpt.parent.mkdir(parents=True)
+    ckpt.write_bytes(b"")
+    assert training_run_id(ckpt) is None  # no file: unknown, silently
+    for malformed in ("../../etc/passwd", "run id with spaces", "ABCDEF" * 6):
+        (tmp_path / "run" / "mlflow_run_id").write_text(malformed)
+        assert training_run_id(ckpt) is None
+        assert "holds no MLflow run id" in capsys.readouterr().out
+    (tmp_path / "run" / "mlflow_run_id").write_text("0123456789abcdef0123456789abcdef\n")
+    assert training_run_id(ckpt) == "0123456789abcdef0123456789abcdef"

@@ -9,6 +9,7 @@ and optionally writes every prediction as linear EXR and tone-mapped PNG, and ev
 
 from __future__ import annotations
 
+import re
 import sys
 import textwrap
 from pathlib import Path
@@ -58,7 +59,15 @@ class WritePredictions(L.Callback):
 def training_run_id(ckpt_path: Path) -> str | None:
     """The MLflow run that wrote a checkpoint (``<run dir>/checkpoints/x.ckpt`` beside ``mlflow_run_id``)."""
     file = ckpt_path.resolve().parent.parent / RUN_ID_FILE
-    return file.read_text().strip() if file.exists() else None
+    if not file.exists():
+        return None
+    recorded = file.read_text(errors="replace").strip()
+    if not re.fullmatch(r"[0-9a-f]{32}", recorded):  # a file anyone can edit: never passed to the store as an id
+        print(
+            f"wdss.eval: {file} holds no MLflow run id ({recorded[:40]!r}): the training run of {ckpt_path} is unknown"
+        )
+        return None
+    return recorded
 
 
 def _eval_logger(cfg: DictConfig, ckpt: Path) -> Any:
