@@ -139,8 +139,12 @@ def test_non_finite_values_fail_by_default_and_sanitize_counts(tmp_path):
     planes["G"][0, :3] = np.nan
     planes["G"][1, 0] = np.inf
     write_exr(path, planes)
-    with pytest.raises(SceneError, match=r"frame 1, file .*PretonemapMetallic.0001.exr, channel G: 4 non-finite"):
+    with pytest.raises(
+        SceneError, match=r"frame 1, file .*PretonemapMetallic.0001.exr, channel G: 4 non-finite"
+    ) as err:
         Sequence(seq_dir).read(1, 8, ["color"])
+    # the switch by the name each command takes: training's key, and upscale's and export's override
+    assert "data.preprocessing.sanitize=true" in str(err.value) and "+preprocessing.sanitize=true" in str(err.value)
     seq = Sequence(seq_dir)
     color = seq.read(1, 8, ["color"], sanitize=True)["color"]
     assert np.isfinite(color).all() and color[1, 0, :3].tolist() == [0, 0, 0]

@@ -39,6 +39,7 @@ import torch
 
 from wdss.data.cache import FrameCache
 from wdss.data.exr import read_exr, read_exr_size
+from wdss.data.preprocess import SANITIZE_ELSEWHERE
 from wdss.data.preprocess import depth_range as frame_depth_range
 from wdss.data.sampling import crop
 from wdss.errors import UserError
@@ -444,7 +445,7 @@ class Sequence(SidecarFacts):
                     if not sanitize:
                         raise SceneError(
                             f"{where}: {count} non-finite value(s) (NaN or Inf); set data.preprocessing.sanitize=true "
-                            "to replace them by 0"
+                            f"to replace them by 0 ({SANITIZE_ELSEWHERE})"
                         )
                     plane[bad] = 0.0
                     self.sanitized[f"{name}:{channel}"] = self.sanitized.get(f"{name}:{channel}", 0) + count

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from wdss.data.layouts import BUFFERS, SceneError, Sidecar, SidecarFacts, parse_sidecar
-from wdss.data.preprocess import depth_range
+from wdss.data.preprocess import SANITIZE_ELSEWHERE, depth_range
 
 __all__ = ["FORMAT", "VERSION", "PackedSequence", "discover_packed", "far_key", "is_packed"]
 
@@ -199,7 +199,7 @@ class PackedSequence(SidecarFacts):
                 if not sanitize:
                     raise SceneError(
                         f"{where}: {counts[buffer]} non-finite value(s) (NaN or Inf) in the frame; set "
-                        "data.preprocessing.sanitize=true to replace them by 0"
+                        f"data.preprocessing.sanitize=true to replace them by 0 ({SANITIZE_ELSEWHERE})"
                     )
                 bad = ~np.isfinite(out[buffer])
                 if bad.any():

@@ -48,6 +48,10 @@ GBUFFER_STACK = ("base_color", "depth", "normal", "specular", "roughness", "nov"
 LR_GUIDE = GBUFFER_STACK[:3]
 
 
+# The same switch where the command is not training: upscale and export take overrides of the training's preprocessing.
+SANITIZE_ELSEWHERE = "wdss.upscale and wdss.export: +preprocessing.sanitize=true"
+
+
 @dataclass
 class Preprocessing:
     """How buffers become batch tensors (the ``data.preprocessing`` config)."""
