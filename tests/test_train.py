@@ -362,6 +362,14 @@ def test_the_test_after_a_resume_loads_only_a_checkpoint_of_its_own_run(tmp_path
         assert f"the best checkpoint the state names, {path}, is not one of this run's" in capsys.readouterr().err
 
 
+def test_resuming_a_run_another_tracking_store_holds_is_refused_in_one_line(tmp_path, tracking):
+    last = fake_run(tmp_path, "a", "experiment=smoke", started=1000, checkpointed=1100)  # MLflow run id-a, elsewhere
+    cfg = compose_train(["experiment=smoke", "ckpt_path=last"], tmp_path)
+    with pytest.raises(ConfigError, match=rf"ckpt_path=last: {last} was trained in MLflow run id-a, which the tracking "
+                       r"store .* does not hold .*point logger.tracking_uri"):  # fmt: skip
+        train(cfg)
+
+
 def test_last_ckpt_is_written_every_epoch_and_when_sigterm_lands_in_validation(tmp_path, tracking, monkeypatch):
     """lr=0: val/psnr never improves after epoch 0, so only an every-epoch last.ckpt can hold epoch 1."""
     import signal

@@ -206,6 +206,21 @@ def _own_checkpoint(path: str, cfg: DictConfig, run_id: str | None) -> str:
     return ""
 
 
+def _check_resumable(client: Any, run_id: str, uri: str, ckpt: str | None) -> None:
+    """Refuse, in one line, to resume into a run this tracking store does not hold (it was logged to another store:
+    MLflow would say only "Run not found")."""
+    from mlflow.exceptions import MlflowException
+
+    try:
+        client.get_run(run_id)
+    except MlflowException as err:
+        raise ConfigError(
+            f"ckpt_path=last: {ckpt} was trained in MLflow run {run_id}, which the tracking store {uri} does not hold "
+            f"({err.error_code}): point logger.tracking_uri (or MLFLOW_TRACKING_URI) at the store it was logged to, or "
+            f"resume into a new run with ckpt_path={ckpt}"
+        ) from err
+
+
 LOCK_FILE = "training.pid"  # in a run's output directory while it trains: whose process writes its MLflow run
 
 
@@ -285,6 +300,8 @@ def train(cfg: DictConfig) -> dict[str, float]:
         prepare_store(uri)
         reap_dead_runs(uri, str(cfg.experiment_name))
         ensure_experiment(MlflowClient(uri), str(cfg.experiment_name))
+        if resume_run:
+            _check_resumable(MlflowClient(uri), resume_run, str(uri), ckpt_path)
     tags = run_tags(cfg)
     if hasattr(module.net, "needs_training"):  # which weights a pretrained-capable baseline reports with
         tags["weights"] = f"published:{module.net.weights}" if module.net.weights else "trained-on-wdss-frames"
