@@ -314,7 +314,7 @@ def test_ckpt_path_last_refuses_runs_of_one_name_that_trained_at_the_same_time(t
     assert f"{later} (MLflow run id-b)" in str(err.value) and f"{earlier} (MLflow run id-a)" in str(err.value)
 
 
-def test_ckpt_path_last_refuses_a_run_that_is_still_training_naming_its_pid(tmp_path):
+def test_ckpt_path_last_refuses_a_run_that_is_still_training_naming_its_pid(tmp_path, monkeypatch):
     """Two processes must never write one MLflow run: the run folder, or a later folder that resumed the same run,
     holds the pid of the process training it; a lock whose process is gone holds nothing."""
     import subprocess
@@ -338,6 +338,9 @@ def test_ckpt_path_last_refuses_a_run_that_is_still_training_naming_its_pid(tmp_
         (resumed / LOCK_FILE).write_text(str(other.pid))
         with pytest.raises(ConfigError, match=rf"resumed is still training \(pid {other.pid}\)"):
             _resume(cfg)
+        with monkeypatch.context() as env:  # DDP: rank 1 joins the job whose lock rank 0 holds
+            env.setenv("LOCAL_RANK", "1")
+            assert _resume(cfg) == (str(last), "id-a")
     finally:
         other.kill()
         other.wait()

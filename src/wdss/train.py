@@ -173,7 +173,7 @@ def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
     writers = [ckpt.parent.parent] + [
         f.parent for f in log_dir.glob(f"**/{RUN_ID_FILE}") if run_id and _recorded(f.parent, RUN_ID_FILE) == run_id
     ]
-    for run_dir in dict.fromkeys(writers):
+    for run_dir in dict.fromkeys(writers) if not _other_rank() else ():  # rank 0 checked it for the job
         pid = training_pid(run_dir)
         if pid is not None:
             raise ConfigError(
@@ -219,6 +219,18 @@ def _check_resumable(client: Any, run_id: str, uri: str, ckpt: str | None) -> No
             f"({err.error_code}): point logger.tracking_uri (or MLFLOW_TRACKING_URI) at the store it was logged to, or "
             f"resume into a new run with ckpt_path={ckpt}"
         ) from err
+
+
+def _other_rank() -> bool:
+    """Whether this process is a rank other than 0 of a DDP job (started by rank 0, or by SLURM): rank 0 holds the
+    job's lock, which a rank must not take for another writer."""
+    for name in ("LOCAL_RANK", "RANK", "SLURM_PROCID"):
+        try:
+            if int(os.environ.get(name, "0")) > 0:
+                return True
+        except ValueError:
+            continue
+    return False
 
 
 LOCK_FILE = "training.pid"  # in a run's output directory while it trains: whose process writes its MLflow run
