@@ -612,6 +612,18 @@ def test_a_folder_of_other_wdss_renders_is_never_resumed_as_the_preset(tmp_path,
     # Its own folder, stopped part-way, resumes.
     own = tmp_path / "mini"
     write_sequence(own / "train_000", frames=(0, 1), size=(8, 8), scales=())
-    (own / "train_000" / "sequence.json").write_text(json.dumps({**meta, "render_seconds": {"0": 1}}))
+    stopped = {**meta, "seed": 100, "settings": {**meta["settings"], "frames": 3}, "render_seconds": {"0": 1}}
+    (own / "train_000" / "sequence.json").write_text(json.dumps(stopped))
     SceneDataModule(own, {"train": ["train_000"]}, ["target"], prepare=prepare).prepare_data()
+    assert rendered == [own]
+    # Rendered from an earlier version of the preset (train_000 had 24 frames): refused, not resumed into a mix.
+    (own / "train_000" / "sequence.json").write_text(
+        json.dumps({**stopped, "settings": {**meta["settings"], "frames": 24}})
+    )
+    with pytest.raises(
+        SceneError,
+        match=r"train_000 was rendered from an earlier version of the 'mini' preset "
+        r"\(seed 100, 24 frames; now seed 100, 3 frames\)\. Remove .*mini and it is rendered again",
+    ):
+        SceneDataModule(own, {"train": ["train_000"]}, ["target"], prepare=prepare).prepare_data()
     assert rendered == [own]

@@ -181,3 +181,32 @@ def test_the_cpu_experiment_turns_tap_brdf_on_for_the_learned_kernel():
         assert compose_train([f"variant={variant}"]).model.net.tap_brdf is False
     colour = compose_train(["variant=joint_bilateral_color", "experiment=cpu"]).model.net
     assert colour.demodulated is False
+
+
+@pytest.mark.parametrize("transform,space", [("swt", "log"), ("dwt", "linear"), ("none", "log")])
+def test_a_full_resolution_refinement_starts_at_zero_and_learns_from_the_first_step(transform, space):
+    """recipe.refine_width: the network with the refinement starts exactly as without it (its last layer is zero),
+    and one step of the loss already moves that last layer, while the head's zero exit stays behind it."""
+    torch.manual_seed(0)
+    data = batch(size=(15, 21), scale=3.0)
+    torch.manual_seed(1)
+    plain = net(transform, "haar", output_space=space, residual="bilinear")
+    torch.manual_seed(1)
+    refined = net(transform, "haar", output_space=space, residual="bilinear", refine_width=8)
+    torch.testing.assert_close(forward(refined, data)["irradiance"], forward(plain, data)["irradiance"])
+    # Its input: log1p of the image, the G-buffer stack and the spatial mask, at full resolution.
+    assert refined.refine.body[0].in_channels == 3 + data["gbuffer"].shape[1] + 1
+    out = forward(refined, data)
+    (out["irradiance"] - data["target"] / data["brdf"]).abs().mean().backward()
+    assert refined.refine.body[-1].weight.grad.abs().sum() > 0
+    assert refined.refine.body[0].weight.grad.abs().sum() == 0  # behind the zero last layer until it moves
+    with pytest.raises(ValueError, match="refine_width"):
+        net(refine_width=-1)
+    assert net().refine is None  # off by default: the paper's network
+
+
+def test_the_cpu_experiment_composes_the_refinement_option():
+    from tests.test_train import compose_train
+
+    assert compose_train(["experiment=cpu", "recipe.refine_width=16"]).model.net.refine_width == 16
+    assert compose_train(["variant=swt_db4"]).model.net.refine_width == 0

@@ -265,6 +265,12 @@ class SceneDataModule(L.LightningDataModule):
                     "rendered again on first use (or: make data)"
                 )
             rendered[sidecar.parent.name] = meta
+        outdated = getattr(self.prepare, "outdated", None)
+        why = outdated(rendered) if outdated is not None and rendered else None
+        if why:
+            raise SceneError(
+                f"{self.root}: {why}. Remove {self.root} and it is rendered again on first use (or: make data)"
+            )
         # A render of this dataset that was stopped part-way (wdss renders here, and a sequence of the splits is
         # missing or unfinished) resumes; a folder of other frames is never rendered into.
         names = {name for names, _ in self.splits.values() for name in names}

@@ -265,6 +265,30 @@ class FourierINR(nn.Module):
         return self.exit(out)
 
 
+class Refinement(nn.Module):
+    """A correction at full resolution after the synthesis (``refine_width > 0``, an option beside the paper's
+    design): 3x3 convolutions on log1p of the synthesised image, the G-buffers and the spatial mask, whose output is
+    added to the image in the head's output space. Its last layer starts at zero, so the network starts as it would
+    without it; unlike the head's exit behind half-resolution cells, that layer sees full-resolution features and
+    the loss's gradient from the first step."""
+
+    def __init__(self, cin: int, width: int, depth: int = 3) -> None:
+        super().__init__()
+        if width < 1 or depth < 2:
+            raise ValueError(f"model.refine_width must be >= 1 and model.refine_depth >= 2, got {width}, {depth}")
+        chans = [cin] + [width] * (depth - 1) + [RGB]
+        layers: list[nn.Module] = [
+            m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())
+        ]
+        self.body = nn.Sequential(*layers[:-1])
+        nn.init.zeros_(self.body[-1].weight)
+        nn.init.zeros_(self.body[-1].bias)
+
+    def forward(self, log_image: Tensor, guide: Tensor) -> Tensor:
+        """The correction, from ``log_image`` (log1p irradiance, RGB) and ``guide`` (G-buffers and spatial mask)."""
+        return self.body(torch.cat([log_image, guide], 1))
+
+
 class WDSSNet(nn.Module):
     """The WDSS super-resolution network for one transform x basis x head x temporal choice.
 
@@ -303,6 +327,9 @@ class WDSSNet(nn.Module):
         exit_init: float = 0.0,
         residual_input: bool = False,
         tap_brdf: bool = False,
+        refine_width: int = 0,
+        refine_depth: int = 3,
+        kernel_per_channel: bool = False,
     ) -> None:
         super().__init__()
         if output_space not in OUTPUT_SPACES:
@@ -310,8 +337,13 @@ class WDSSNet(nn.Module):
         if residual not in RESIDUALS:
             raise ValueError(f"model.residual must be one of {', '.join(RESIDUALS)}, got {residual!r}")
         self.output_space, self.residual = output_space, residual
-        # tap_brdf is the learned kernel's option (a per-tap BRDF exponent): without that kernel it changes nothing.
-        self.upsampler = LearnedBilateralUpsample(tap_brdf=tap_brdf) if residual == "learned_bilateral" else None
+        # tap_brdf and kernel_per_channel are the learned kernel's options (a per-tap BRDF exponent, one weight per
+        # tap and colour channel): without that kernel they change nothing.
+        self.upsampler = (
+            LearnedBilateralUpsample(tap_brdf=tap_brdf, per_channel=kernel_per_channel)
+            if residual == "learned_bilateral"
+            else None
+        )
         if residual_input and residual == "none":
             raise ValueError(
                 "model.residual_input needs a residual upsampler (model.residual: bilinear, joint_bilateral or "
@@ -365,6 +397,7 @@ class WDSSNet(nn.Module):
         # Exit convolution: on RGB at H (none), on the DWT bands at H/2, on the SWT subbands at H.
         exit_channels = RGB if transform == "none" else self.coeff_channels
         self.exit = conv3x3(exit_channels, exit_channels)
+        self.refine = Refinement(RGB + n_gbuffer + 1, refine_width, refine_depth) if refine_width else None
         if residual != "none":
             # exit_init 0: the network starts exactly as its upsampler (its correction is zero); > 0 scales the
             # default initialisation instead: a zero exit passes no gradient to the layers before it, which then
@@ -465,6 +498,9 @@ class WDSSNet(nn.Module):
                     coefficients = coefficients + self.wavelet.analysis(base)
                 image = self.wavelet(coefficients)  # forward() is the synthesis; a submodule for FLOP counts
         image = image[..., :height, :width]
+        if self.refine is not None:  # after the synthesis: the subbands (and the wavelet loss) are those before it
+            log_image = image if self.output_space == "log" else to_log(image.clamp_min(0.0))
+            image = image + self.refine(log_image, torch.cat([gbuffer, spatial_mask], 1))
         if coefficients is not None and self.transform == "swt":
             coefficients = coefficients[..., :height, :width]
         return {"irradiance": self._from_space(image), "coefficients": coefficients}

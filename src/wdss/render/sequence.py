@@ -488,6 +488,23 @@ class RenderOnFirstUse:
         its own folder (or anywhere, when asked), never in a folder of other frames that lacks a split's sequence."""
         return self.anywhere or (self.home is not None and Path(root).resolve() == self.home.resolve())
 
+    def outdated(self, rendered: Mapping[str, Mapping[str, Any]]) -> str | None:
+        """Why sequences rendered earlier into this preset's folder (``sequence.json`` by name) are not the preset's
+        today (another seed or frame count: the preset changed since), or ``None``. Resuming would mix the two."""
+        preset = preset_settings(self.name)
+        for seq in preset["sequences"]:
+            meta = rendered.get(seq["name"])
+            if meta is None:
+                continue
+            frames = int(seq.get("frames", preset["frames"]))
+            then = (meta.get("seed"), int((meta.get("settings") or {}).get("frames", -1)))
+            if then != (int(seq["seed"]), frames):
+                return (
+                    f"{seq['name']} was rendered from an earlier version of the {self.name!r} preset (seed {then[0]}, "
+                    f"{then[1]} frames; now seed {seq['seed']}, {frames} frames)"
+                )
+        return None
+
     def __call__(self, root: str | Path) -> list[Path]:
         why = self.refusal(root)
         if why:
