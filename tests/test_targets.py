@@ -429,3 +429,36 @@ def test_python_m_wdss_eval_refuses_a_hydra_callback_off_the_list_before_hydra_b
     assert done.returncode == 2, done.stderr
     assert done.stderr.startswith("wdss.eval: hydra.callbacks.evil._target_=torch.save is not on wdss's allowlist")
     _no_file_but(tmp_path, ckpt)
+
+
+def test_the_checkpoint_ckpt_path_last_finds_is_checked_as_any_other(tmp_path, monkeypatch):
+    """ckpt_path=last resolves to a last.ckpt in a run folder: that file is read and checked before Lightning
+    loads it, as an explicit ckpt_path is."""
+    import wdss.train
+    from wdss.train import ConfigError, train
+
+    net, hparams, message = CRAFTED["interpolated-net"](tmp_path)
+    ckpt = crafted_checkpoint(tmp_path, net, **hparams)
+    monkeypatch.setattr(wdss.train, "_resume", lambda cfg: (str(ckpt), "id-a"))
+    with pytest.raises(ConfigError, match=rf"ckpt_path=last: checkpoint {ckpt}: .*{message}"):
+        train(compose_train(["experiment=smoke", "ckpt_path=last"], tmp_path))
+    assert not (tmp_path / "pwned").exists()
+
+
+@pytest.mark.parametrize("content", [b"not weights", None])
+def test_weight_files_named_by_the_config_are_read_weights_only_with_the_key_in_the_error(content, tmp_path):
+    from wdss.checkpoint import CheckpointError
+    from wdss.model.metrics import LPIPS
+    from wdss.model.rrdbnet import RRDBNet
+
+    weights = tmp_path / "weights.pth"
+    if content is None:
+        _payload(tmp_path).rename(weights)  # a pickle of code in a torch archive
+    else:
+        weights.write_bytes(content)
+    with pytest.raises(CheckpointError, match=rf"^model\.net\.weights={weights} (is not a torch|cannot be read)") as e:
+        RRDBNet(weights=str(weights))
+    assert "weights_only" not in str(e.value)
+    with pytest.raises(CheckpointError, match=rf"^loss\.lpips\.backbone={weights} "):
+        LPIPS(weights, weights)
+    assert not (tmp_path / "pwned").exists()

@@ -260,6 +260,29 @@ def test_resume_from_last_continues_the_same_run(tmp_path, tracking):
     assert steps == [0, 1, 2, 3]  # steps 0-1 from the first run, 2-3 after resuming: nothing trained twice
 
 
+def test_a_resume_that_fails_before_training_a_step_leaves_the_run_as_it_was(tmp_path, tracking, monkeypatch):
+    """A killed run resumed with ckpt_path=last whose resume fails (here: the fit raises at once) stays KILLED, with
+    the error in a tag: it was not the run that failed, and ckpt_path=last can still resume it."""
+    import lightning
+
+    first = compose_train(["experiment=smoke", "trainer.max_epochs=1", "test=false"], tmp_path)
+    train(first)
+    [run] = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
+    tracking.set_terminated(run.info.run_id, "KILLED")  # as a SIGKILL leaves it (reaped)
+    second = compose_train(["experiment=smoke", "trainer.max_epochs=2", "test=false", "ckpt_path=last"], tmp_path / "b")
+    with open_dict(second):
+        second.paths.log_dir = str(tmp_path)
+
+    def broken_fit(*args, **kwargs):
+        raise RuntimeError("the data moved")
+
+    monkeypatch.setattr(lightning.Trainer, "fit", broken_fit)
+    with pytest.raises(RuntimeError, match="the data moved"):
+        train(second)
+    again = tracking.get_run(run.info.run_id)
+    assert again.info.status == "KILLED" and again.data.tags["resume_error"] == "RuntimeError: the data moved"
+
+
 def test_video_under_ddp_is_refused_before_any_run(tmp_path, tracking):
     with pytest.raises(ConfigError, match="video=true needs one process"):
         train(compose_train(["experiment=smoke", "trainer=ddp_cpu", "video=true"], tmp_path))

@@ -230,3 +230,22 @@ def test_a_rerun_with_other_preprocessing_is_refused_rather_than_mixed_into_the_
     upscale(compose_upscale(tmp_path, *args))  # the same again: resumes, nothing to do
     with pytest.raises(UpscaleError, match=r"holds the frames of another upscale \(preprocessing "):
         upscale(compose_upscale(tmp_path, *args, "+preprocessing.color_max=4.0"))
+
+
+def test_the_trained_scales_are_read_from_the_run_folder_resolving_nothing(tmp_path):
+    from wdss.checkpoint import CheckpointError
+    from wdss.data.dataset import parse_scale
+    from wdss.upscale import trained_scales
+
+    ckpt = tmp_path / "run" / "checkpoints" / "last.ckpt"
+    ckpt.parent.mkdir(parents=True)
+    config = tmp_path / "run" / ".hydra" / "config.yaml"
+    config.parent.mkdir()
+    config.write_text("scale:\n  train: {choices: [2, 3]}\ndata:\n  scale: ${scale.train}\n")
+    assert trained_scales(ckpt) == parse_scale({"choices": [2, 3]})  # wdss's own interpolation, followed by hand
+    config.write_text("scale:\n  train: ${oc.env:HOME}\ndata:\n  scale: ${scale.train}\n")
+    with pytest.raises(CheckpointError, match=r"config.yaml \(the run of checkpoint .*\): data.scale=\$\{oc.env"):
+        trained_scales(ckpt)
+    config.write_text('data:\n  scale: "${oc.create:{_target_: pathlib.Path.touch, self: x}}"\n')
+    with pytest.raises(CheckpointError, match=r"data.scale=\$\{oc.create"):
+        trained_scales(ckpt)

@@ -19,7 +19,7 @@ from omegaconf import OmegaConf
 from wdss.errors import UserError
 from wdss.targets import TargetRefused, check_targets, refuse_interpolation
 
-__all__ = ["CheckpointError", "read_checkpoint", "training_preprocessing"]
+__all__ = ["CheckpointError", "load_weights", "read_checkpoint", "training_preprocessing"]
 
 
 class CheckpointError(UserError):
@@ -35,6 +35,27 @@ def _nearby(path: Path) -> str:
                 shown = ", ".join(found[:8]) + (f", ... ({len(found)} in all)" if len(found) > 8 else "")
                 return f"; {folder} holds {shown}"
     return ""
+
+
+def load_weights(path: str | Path, what: str) -> dict[str, Any]:
+    """A state dict file named by the config key ``what`` (published or local weights: LPIPS, Real-ESRGAN), opened
+    weights-only; anything else gets one sentence naming the key and the file, never torch's advice to retry with
+    ``weights_only=False``."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{what}={path} is not a file")
+    if not zipfile.is_zipfile(path):  # every torch.save since 1.6 writes a zip archive
+        raise CheckpointError(f"{what}={path} is not a torch weight file (torch.save writes a zip archive)")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:
+        raise CheckpointError(
+            f"{what}={path} cannot be read as weights ({type(err).__name__}): it is damaged or holds objects other "
+            "than tensors and plain values, which wdss never loads"
+        ) from None
+    if not isinstance(state, dict):
+        raise CheckpointError(f"{what}={path} holds a {type(state).__name__}, not a state dict")
+    return state
 
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:

@@ -206,13 +206,13 @@ def _own_checkpoint(path: str, cfg: DictConfig, run_id: str | None) -> str:
     return ""
 
 
-def _check_resumable(client: Any, run_id: str, uri: str, ckpt: str | None) -> None:
-    """Refuse, in one line, to resume into a run this tracking store does not hold (it was logged to another store:
-    MLflow would say only "Run not found")."""
+def _check_resumable(client: Any, run_id: str, uri: str, ckpt: str | None) -> str:
+    """The status of the run to resume (KILLED, FAILED, ...); refused, in one line, when this tracking store does not
+    hold it (it was logged to another store: MLflow would say only "Run not found")."""
     from mlflow.exceptions import MlflowException
 
     try:
-        client.get_run(run_id)
+        return str(client.get_run(run_id).info.status)
     except MlflowException as err:
         raise ConfigError(
             f"ckpt_path=last: {ckpt} was trained in MLflow run {run_id}, which the tracking store {uri} does not hold "
@@ -272,6 +272,12 @@ def train(cfg: DictConfig) -> dict[str, float]:
     output_dir = Path(str(cfg.paths.output_dir))
     output_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path, resume_run = _resume(cfg)
+    resumed_step = -1  # the global step a resumed run's checkpoint holds: a failure before passing it is the resume's
+    if ckpt_path is not None and cfg.get("ckpt_path") == "last":  # an explicit path was read in validate()
+        try:
+            resumed_step = int(read_checkpoint(ckpt_path).get("global_step", 0))  # data, checked as any other
+        except CheckpointError as err:
+            raise ConfigError(f"ckpt_path=last: {err}") from err
 
     module = instantiate(cfg.model, tonemap_exposure=cfg.get("tonemap_exposure"))
     fitting = module.trainable and cfg.get("fit", True)
@@ -306,6 +312,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
             "with python -m wdss.eval ckpt_path=PATH video=true"
         )
     uri = OmegaConf.select(cfg, "logger.tracking_uri")
+    status_before = None  # of the run a resume continues
     if uri and trainer.is_global_zero:
         from mlflow import MlflowClient
 
@@ -313,7 +320,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
         reap_dead_runs(uri, str(cfg.experiment_name))
         ensure_experiment(MlflowClient(uri), str(cfg.experiment_name))
         if resume_run:
-            _check_resumable(MlflowClient(uri), resume_run, str(uri), ckpt_path)
+            status_before = _check_resumable(MlflowClient(uri), resume_run, str(uri), ckpt_path)
     tags = run_tags(cfg)
     if hasattr(module.net, "needs_training"):  # which weights a pretrained-capable baseline reports with
         tags["weights"] = f"published:{module.net.weights}" if module.net.weights else "trained-on-wdss-frames"
@@ -362,7 +369,12 @@ def train(cfg: DictConfig) -> dict[str, float]:
         if stopped_by is None:
             log_exception(error, "wdss.train")
             log_files_to_mlflow(experiment, run_id, "wdss.train")
-            logger.finalize("FAILED")
+            if status_before is not None and trainer.global_step <= resumed_step:
+                # The resume failed before training a step: the run stays what it was (KILLED, say), not FAILED.
+                experiment.set_tag(run_id, "resume_error", f"{type(error).__name__}: {error}"[:500])
+                logger.finalize(status_before)
+            else:
+                logger.finalize("FAILED")
             raise
         logger.finalize("KILLED")
         print(f"wdss.train: stopped by {stopped_by.name}; resume with ckpt_path=last (checkpoints in {output_dir})")

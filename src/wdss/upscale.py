@@ -44,7 +44,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from torch import Tensor
 
-from wdss.checkpoint import read_checkpoint, training_preprocessing
+from wdss.checkpoint import CheckpointError, read_checkpoint, training_preprocessing
 from wdss.data.dataset import Collate, FrameDataset, Preprocessing, ScaleSpec, parse_scale
 from wdss.data.exr import ExrError, read_exr, write_exr
 from wdss.data.layouts import SceneError, Sequence
@@ -53,6 +53,7 @@ from wdss.model.baselines import Upsample
 from wdss.model.blocks import fold_rir_blocks
 from wdss.model.module import SuperResolutionModule, comparison_panel
 from wdss.paths import CONF_DIR
+from wdss.targets import TargetRefused, refuse_interpolation
 from wdss.progress import Progress
 from wdss.video import LABELS, Mp4Writer, labelled
 
@@ -93,11 +94,19 @@ def trained_scales(ckpt: Path) -> ScaleSpec | None:
     if not config.is_file():
         return None
     try:
-        node = OmegaConf.select(OmegaConf.load(config), "data.scale")  # ${scale.train}, resolved
-        if OmegaConf.is_config(node):
-            node = OmegaConf.to_container(node, resolve=True)
-        return None if node is None else parse_scale(node)
+        saved = OmegaConf.to_container(OmegaConf.load(config), resolve=False)  # data: nothing in it is resolved
+        node = (saved.get("data") or {}).get("scale")
+        if node == "${scale.train}":  # the one interpolation wdss writes there, followed by hand
+            node = (saved.get("scale") or {}).get("train")
     except Exception:  # a config of another version: no warning rather than no upscale
+        return None
+    try:
+        refuse_interpolation(node, "data.scale")
+    except TargetRefused as err:
+        raise CheckpointError(f"{config} (the run of checkpoint {ckpt}): {err}") from err
+    try:
+        return None if node is None else parse_scale(node)
+    except Exception:
         return None
 
 

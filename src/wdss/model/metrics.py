@@ -124,11 +124,13 @@ class LPIPS(nn.Module):
                 cin = v
         self.features = nn.Sequential(*layers)
         self.lins = nn.ModuleList(nn.Conv2d(c, 1, 1, bias=False) for c in _CHANNELS)
-        state = torch.load(backbone, map_location="cpu", weights_only=True)
+        from wdss.checkpoint import load_weights
+
+        state = load_weights(backbone, "loss.lpips.backbone")
         self.features.load_state_dict(
             {k.removeprefix("features."): v for k, v in state.items() if k.startswith("features.")}
         )
-        lin_state = torch.load(linear, map_location="cpu", weights_only=True)
+        lin_state = load_weights(linear, "loss.lpips.linear")
         for i, lin in enumerate(self.lins):
             lin.weight.data.copy_(lin_state[f"lin{i}.model.1.weight"])
         self.register_buffer("shift", torch.tensor([-0.030, -0.088, -0.188]).view(1, 3, 1, 1))

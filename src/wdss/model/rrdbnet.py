@@ -100,7 +100,9 @@ class RRDBNet(nn.Module):
         if weights:
             if not os.path.isfile(weights):
                 raise FileNotFoundError(f"model.net.weights={weights} is not a file (Real-ESRGAN's published .pth)")
-            state = torch.load(weights, map_location="cpu", weights_only=True)
+            from wdss.checkpoint import load_weights
+
+            state = load_weights(weights, "model.net.weights")
             state = state.get("params_ema", state.get("params", state))
             self.load_state_dict(state)
 
