@@ -53,8 +53,8 @@ from wdss.model.baselines import Upsample
 from wdss.model.blocks import fold_rir_blocks
 from wdss.model.module import SuperResolutionModule, comparison_panel
 from wdss.paths import CONF_DIR
-from wdss.targets import TargetRefused, refuse_interpolation
 from wdss.progress import Progress
+from wdss.targets import TargetRefused, refuse_interpolation
 from wdss.video import LABELS, Mp4Writer, labelled
 
 __all__ = ["UpscaleError", "main", "output_name", "upscale"]
