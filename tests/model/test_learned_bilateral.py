@@ -184,35 +184,3 @@ def test_with_tap_brdf_the_gradient_reaches_every_parameter():
             for name, parameter in model.named_parameters():
                 assert parameter.grad is not None and parameter.grad.abs().sum() > 0, name
         optimizer.step()
-
-
-@pytest.mark.parametrize("tap_brdf", [False, True])
-def test_per_channel_weights_start_at_joint_bilateral_and_move_each_channel_on_its_own(tap_brdf):
-    """per_channel: one logit correction per colour channel. It starts as joint bilateral upsampling; a correction
-    of the blue channel's logits changes blue only, and every channel stays a convex combination of its taps."""
-    torch.manual_seed(0)
-    data = batch(size=(18, 22), scale=3.0)
-    lr_brdf = F.interpolate(data["brdf"], size=data["lr"].shape[-2:], mode="nearest-exact")
-    extra = dict(brdf=data["brdf"], lr_brdf=lr_brdf) if tap_brdf else {}
-    model = LearnedBilateralUpsample(per_channel=True, tap_brdf=tap_brdf)
-    assert model.mlp[-1].out_channels == 3 + tap_brdf
-    fixed = joint_bilateral_upsample(data["lr"], data["gbuffer"])
-    torch.testing.assert_close(model(data["lr"], data["gbuffer"], **extra)["irradiance"], fixed, atol=1e-5, rtol=1e-5)
-    with torch.no_grad():
-        model.mlp[-1].weight[2].normal_(generator=torch.Generator().manual_seed(1))
-    out = model(data["lr"], data["gbuffer"], **extra)["irradiance"]
-    torch.testing.assert_close(out[:, :2], fixed[:, :2], atol=1e-5, rtol=1e-5)
-    assert not torch.allclose(out[:, 2], fixed[:, 2], atol=1e-3)
-    constant = torch.full_like(data["lr"], 0.7)  # per channel, still a convex combination
-    torch.testing.assert_close(model(constant, data["gbuffer"], **extra)["irradiance"], torch.full_like(fixed, 0.7))
-
-
-def test_the_cpu_recipe_passes_kernel_per_channel_to_the_kernel_of_either_model():
-    from tests.test_train import compose_train
-    from wdss.targets import instantiate
-
-    for variant in ("swt_db4", "learned_bilateral"):
-        cfg = compose_train([f"variant={variant}", "experiment=cpu", "recipe.kernel_per_channel=true"])
-        net = instantiate(cfg.model.net)
-        kernel = getattr(net, "upsampler", None) or net
-        assert kernel.per_channel and kernel.mlp[-1].out_channels == 4  # 3 logits and tap_brdf's exponent

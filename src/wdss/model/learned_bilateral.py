@@ -18,12 +18,6 @@ smooth irradiance; the exponent lets the kernel choose per tap. The exponent is 
 sigmoid, so that the start is exact and its gradient flows there; an output pushed below 0 everywhere would stop
 learning it (on data/mini every seed moved it up).
 
-``per_channel`` (``recipe.kernel_per_channel``): one logit correction per colour channel, so that each channel
-weighs the taps its own way. Demodulation is exact only where the diffuse and the specular light agree: on a
-texture whose colours differ greatly in one channel (a checker of 0.26 and 0.02 blue), that channel's irradiance
-keeps the texture's edges (its specular share differs across them) while the others are smooth; one weight per
-tap must then mix across the edges for all three channels or for none.
-
 Why: at CPU scale the WDSS network barely leaves its starting point in a few hundred steps, while this kernel
 (625 parameters, 690 with ``tap_brdf``) learns a correction that generalises to unseen scenes within a hundred
 (docs/results.md, "Where CPU models stand"). It is the residual base ``recipe.residual=learned_bilateral`` of the
@@ -40,7 +34,6 @@ from wdss.model.joint_bilateral import check_ranges, joint_bilateral_upsample, n
 __all__ = ["LearnedBilateralUpsample"]
 
 GBUFFER_CHANNELS = 11  # wdss.data.GBUFFER_STACK
-RGB = 3
 # Scaled guide differences beyond this many range widths all mean "a different surface": clamped, so that the
 # MLP sees bounded inputs (the fixed range weight, exp(-25), already excludes such a tap).
 _DIFFERENCE_LIMIT = 5.0
@@ -66,10 +59,9 @@ class LearnedBilateralUpsample(nn.Module):
         sigma_albedo: float = 0.1,
         radius: int = 2,
         tap_brdf: bool = False,
-        per_channel: bool = False,
     ) -> None:
         super().__init__()
-        self.tap_brdf, self.per_channel = bool(tap_brdf), bool(per_channel)
+        self.tap_brdf = bool(tap_brdf)
         if hidden < 1 or context < 0:
             raise ValueError(f"hidden must be >= 1 and context >= 0, got hidden={hidden}, context={context}")
         check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
@@ -84,9 +76,7 @@ class LearnedBilateralUpsample(nn.Module):
         )  # fmt: skip
         # difference, |difference|, offset, tent, log deviation, context (and the log BRDF ratio with tap_brdf)
         features = 7 + 7 + 2 + 1 + 3 + context + (3 if self.tap_brdf else 0)
-        # The logit correction (one per colour channel with per_channel) and the tap's BRDF exponent (tap_brdf).
-        self.logits = RGB if self.per_channel else 1
-        outputs = self.logits + (1 if self.tap_brdf else 0)
+        outputs = 2 if self.tap_brdf else 1  # the logit correction (and the tap's BRDF exponent)
         self.mlp = nn.Sequential(
             nn.Conv2d(features, hidden, 1), nn.ReLU(), nn.Conv2d(hidden, hidden, 1), nn.ReLU(),
             nn.Conv2d(hidden, outputs, 1),
@@ -152,13 +142,13 @@ class LearnedBilateralUpsample(nn.Module):
                 1,
             )
             out = self.mlp(features)
-            correction = out[:, : self.logits].clamp(-_LOGIT_LIMIT, _LOGIT_LIMIT)
+            correction = out[:, :1].clamp(-_LOGIT_LIMIT, _LOGIT_LIMIT)
             # Taps outside the tent (weight 0) stay out: -inf would make a NaN gradient, a large negative does not.
             base = torch.log(range_weight(tap).clamp_min(1e-30))
             logits.append(torch.where(tap.spatial > 0, base + correction, -1e4))
             value = tap.values[:, :3]
             if self.tap_brdf:  # clamp, not a sigmoid: the kernel starts exactly at b = 0, and its gradient flows there
-                exponent = out[:, self.logits : self.logits + 1].clamp(0.0, 1.0)
+                exponent = out[:, 1:2].clamp(0.0, 1.0)
                 value = value * torch.exp(
                     exponent * (tap.values[:, 6:9] - log_brdf).clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT)
                 )
