@@ -64,9 +64,11 @@ def test_the_gradient_reaches_every_parameter_after_one_step(context):
         optimizer.step()
 
 
-def test_it_learns_an_edge_the_fixed_kernel_blurs():
+@pytest.mark.parametrize("never_raise", [False, True])
+def test_it_learns_an_edge_the_fixed_kernel_blurs(never_raise):
     """Two surfaces whose albedos differ by less than the fixed albedo range (sigma 0.1) but whose irradiance
-    differs by 4x: joint bilateral upsampling mixes them at the edge, a learned kernel separates them."""
+    differs by 4x: joint bilateral upsampling mixes them at the edge, a learned kernel separates them (lowering
+    the weights of the other side's taps: never_raise learns it too)."""
     torch.manual_seed(0)
     n, height, width, scale = 4, 32, 32, 2.0
     g = torch.Generator().manual_seed(0)
@@ -79,7 +81,7 @@ def test_it_learns_an_edge_the_fixed_kernel_blurs():
         gbuffer[i, :3, :, edge:] = 0.05
         irradiance[i, :, :, :edge], irradiance[i, :, :, edge:] = 0.5, 2.0
     lr = point_sample(irradiance, lr_size(height, width, scale))
-    model = LearnedBilateralUpsample()
+    model = LearnedBilateralUpsample(never_raise=never_raise)
 
     def error() -> float:
         with torch.no_grad():
@@ -184,3 +186,33 @@ def test_with_tap_brdf_the_gradient_reaches_every_parameter():
             for name, parameter in model.named_parameters():
                 assert parameter.grad is not None and parameter.grad.abs().sum() > 0, name
         optimizer.step()
+
+
+def test_never_raise_ignores_every_correction_that_would_raise_a_tap_above_joint_bilateral():
+    """never_raise caps the logit correction at 0: an MLP whose corrections are all positive (each tap raised by its
+    own amount) leaves joint bilateral upsampling exactly as it is; without the cap the same MLP changes it."""
+    torch.manual_seed(0)
+    data = batch(size=(18, 22), scale=3.0)
+    fixed = joint_bilateral_upsample(data["lr"], data["gbuffer"])
+    outputs = []
+    for never_raise in (True, False):
+        model = LearnedBilateralUpsample(never_raise=never_raise)
+        with torch.no_grad():  # positive corrections that differ per tap: small weights, a large bias
+            model.mlp[-1].weight.normal_(0.0, 0.05, generator=torch.Generator().manual_seed(1))
+            model.mlp[-1].bias.fill_(5.0)
+        outputs.append(model(data["lr"], data["gbuffer"])["irradiance"])
+    torch.testing.assert_close(outputs[0], fixed, atol=1e-5, rtol=1e-5)
+    assert not torch.allclose(outputs[1], fixed, atol=1e-4)
+
+
+def test_checkpoints_of_kernels_that_raised_taps_load_as_they_were_trained():
+    """never_raise is off unless a config turns it on (every config does since it exists): a checkpoint whose
+    stored network config predates it builds the kernel it was trained as."""
+    from tests.test_train import compose_train
+
+    assert not LearnedBilateralUpsample().never_raise
+    from wdss.targets import instantiate
+
+    for variant in ("swt_db4", "learned_bilateral"):
+        net = instantiate(compose_train([f"variant={variant}", "experiment=cpu"]).model.net)
+        assert (getattr(net, "upsampler", None) or net).never_raise

@@ -18,6 +18,15 @@ smooth irradiance; the exponent lets the kernel choose per tap. The exponent is 
 sigmoid, so that the start is exact and its gradient flows there; an output pushed below 0 everywhere would stop
 learning it (on data/mini every seed moved it up).
 
+``never_raise`` (``recipe.kernel_never_raise``, on for every run since 2026-12-07; off in checkpoints written before,
+which load as they were trained): the correction is capped at 0, so the kernel can lower a tap's weight below the
+fixed kernel's, never raise it: it never trusts a tap that joint bilateral's range test distrusts. Where the
+demodulated irradiance keeps a texture's edges (a checker of 0.26 and 0.02 blue: demodulation is exact only where
+diffuse and specular light agree, and there the blue channel's specular share differs across the edges), raising
+the weights of taps across those edges, which the training scenes reward, cost 2.3-3.2 dB against joint bilateral
+on a held-out scene; capping the correction of such a trained kernel at 0 alone gave +0.13 dB over joint bilateral
+there, and kept its gains elsewhere (docs/results.md).
+
 Why: at CPU scale the WDSS network barely leaves its starting point in a few hundred steps, while this kernel
 (625 parameters, 690 with ``tap_brdf``) learns a correction that generalises to unseen scenes within a hundred
 (docs/results.md, "Where CPU models stand"). It is the residual base ``recipe.residual=learned_bilateral`` of the
@@ -59,9 +68,10 @@ class LearnedBilateralUpsample(nn.Module):
         sigma_albedo: float = 0.1,
         radius: int = 2,
         tap_brdf: bool = False,
+        never_raise: bool = False,
     ) -> None:
         super().__init__()
-        self.tap_brdf = bool(tap_brdf)
+        self.tap_brdf, self.never_raise = bool(tap_brdf), bool(never_raise)
         if hidden < 1 or context < 0:
             raise ValueError(f"hidden must be >= 1 and context >= 0, got hidden={hidden}, context={context}")
         check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
@@ -142,7 +152,7 @@ class LearnedBilateralUpsample(nn.Module):
                 1,
             )
             out = self.mlp(features)
-            correction = out[:, :1].clamp(-_LOGIT_LIMIT, _LOGIT_LIMIT)
+            correction = out[:, :1].clamp(-_LOGIT_LIMIT, 0.0 if self.never_raise else _LOGIT_LIMIT)
             # Taps outside the tent (weight 0) stay out: -inf would make a NaN gradient, a large negative does not.
             base = torch.log(range_weight(tap).clamp_min(1e-30))
             logits.append(torch.where(tap.spatial > 0, base + correction, -1e4))

@@ -329,6 +329,7 @@ class WDSSNet(nn.Module):
         tap_brdf: bool = False,
         refine_width: int = 0,
         refine_depth: int = 3,
+        kernel_never_raise: bool = False,
     ) -> None:
         super().__init__()
         if output_space not in OUTPUT_SPACES:
@@ -336,8 +337,13 @@ class WDSSNet(nn.Module):
         if residual not in RESIDUALS:
             raise ValueError(f"model.residual must be one of {', '.join(RESIDUALS)}, got {residual!r}")
         self.output_space, self.residual = output_space, residual
-        # tap_brdf is the learned kernel's option (a per-tap BRDF exponent): without that kernel it changes nothing.
-        self.upsampler = LearnedBilateralUpsample(tap_brdf=tap_brdf) if residual == "learned_bilateral" else None
+        # tap_brdf and kernel_never_raise are the learned kernel's options (a per-tap BRDF exponent; corrections that
+        # only lower tap weights): without that kernel they change nothing.
+        self.upsampler = (
+            LearnedBilateralUpsample(tap_brdf=tap_brdf, never_raise=kernel_never_raise)
+            if residual == "learned_bilateral"
+            else None
+        )
         if residual_input and residual == "none":
             raise ValueError(
                 "model.residual_input needs a residual upsampler (model.residual: bilinear, joint_bilateral or "
