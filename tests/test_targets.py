@@ -462,3 +462,28 @@ def test_weight_files_named_by_the_config_are_read_weights_only_with_the_key_in_
     with pytest.raises(CheckpointError, match=rf"^loss\.lpips\.backbone={weights} "):
         LPIPS(weights, weights)
     assert not (tmp_path / "pwned").exists()
+
+
+@pytest.mark.parametrize(
+    "saved,message",
+    [
+        (
+            "data:\n  preprocessing:\n    brdf: ${oc.env:HOME}\n",
+            r"data\.preprocessing\.brdf=\$\{oc\.env:HOME\} is an interpolation",
+        ),
+        ("data:\n  preprocessing: [1, 2]\n", r"data\.preprocessing is not a mapping of plain values"),
+        ("data:\n  preprocessing:\n    brdf: {_target_: torch.save}\n", r"not a mapping of plain values"),
+    ],
+)
+def test_the_run_config_beside_a_checkpoint_is_read_as_data(saved, message, tmp_path):
+    """The preprocessing eval, upscale and export take from <run>/.hydra/config.yaml: plain values or refused."""
+    from wdss.checkpoint import training_preprocessing
+
+    ckpt = tmp_path / "run" / "checkpoints" / "last.ckpt"
+    ckpt.parent.mkdir(parents=True)
+    (tmp_path / "run" / ".hydra").mkdir()
+    (tmp_path / "run" / ".hydra" / "config.yaml").write_text("data:\n  preprocessing:\n    brdf: extranet\n")
+    assert training_preprocessing(ckpt) == {"brdf": "extranet", "brdf_knee": 0.0}  # a run from before the knee
+    (tmp_path / "run" / ".hydra" / "config.yaml").write_text(saved)
+    with pytest.raises(CheckpointError, match=message):
+        training_preprocessing(ckpt)

@@ -354,6 +354,8 @@ def train(cfg: DictConfig) -> dict[str, float]:
         if cfg.get("test"):
             best = getattr(trainer.checkpoint_callback, "best_model_path", "") if fitting else ""
             best = _own_checkpoint(best, cfg, run_id)
+            if best:
+                read_checkpoint(best)  # a file of this run is still data: checked before Lightning loads it
             # Lightning's results table is for a terminal: in a log it cuts every cell to fit 80 columns, and the
             # metrics are printed in full when the run ends
             trainer.test(

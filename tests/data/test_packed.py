@@ -203,8 +203,10 @@ def test_non_finite_values_fail_unless_sanitized_and_inputs_pack_only_their_buff
     shutil.rmtree(tmp_path / "scenes.packed")
     pack(tmp_path / "scenes", verify=0)
     packed = PackedSequence(tmp_path / "scenes.packed" / "seq")
-    with pytest.raises(SceneError, match=r"sequence 'seq', frame 2, buffer depth .* 1 non-finite value"):
+    with pytest.raises(SceneError, match=r"sequence 'seq', frame 2, buffer depth .* 1 non-finite value") as err:
         packed.read_window(2, 16, ["depth"], (0, 0, 8, 8))
+    # The switch as each command takes it: data.preprocessing.sanitize=true, and upscale/export's own spelling.
+    assert "data.preprocessing.sanitize=true" in str(err.value) and "+preprocessing.sanitize=true" in str(err.value)
     window, _ = packed.read_window(2, 16, ["depth"], (0, 0, 8, 8), sanitize=True)
     assert np.isfinite(window["depth"]).all() and packed.sanitized == {"16P:2:depth": 1}
 
