@@ -389,7 +389,10 @@ def test_the_test_after_a_resume_loads_only_a_checkpoint_of_its_own_run(tmp_path
 
 
 def test_resuming_a_run_another_tracking_store_holds_is_refused_in_one_line(tmp_path, tracking):
+    from tests.test_targets import UPSAMPLE, crafted_checkpoint
+
     last = fake_run(tmp_path, "a", "experiment=smoke", started=1000, checkpointed=1100)  # MLflow run id-a, elsewhere
+    crafted_checkpoint(tmp_path, UPSAMPLE).replace(last)  # a readable checkpoint: what ckpt_path=last reads first
     cfg = compose_train(["experiment=smoke", "ckpt_path=last"], tmp_path)
     with pytest.raises(ConfigError, match=rf"ckpt_path=last: {last} was trained in MLflow run id-a, which the tracking "
                        r"store .* does not hold .*point logger.tracking_uri"):  # fmt: skip
