@@ -37,6 +37,21 @@ def _nearby(path: Path) -> str:
     return ""
 
 
+def _load_archive(path: Path, named: str, kind: str, hint: str, **load: Any) -> Any:
+    """What the torch archive at ``path`` holds, loaded weights-only; a file that is not one, or holds more than
+    tensors and plain values, is one sentence naming it (``named``) as a ``kind``, never torch's advice to retry
+    with ``weights_only=False``."""
+    if not zipfile.is_zipfile(path):  # torch.save (since 1.6) and Lightning write zip archives
+        raise CheckpointError(f"{named} is not a {kind}: not a torch archive ({hint})")
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True, **load)
+    except Exception as err:
+        raise CheckpointError(
+            f"{named} cannot be read as a {kind} ({type(err).__name__}): it is damaged or holds objects other than "
+            "tensors and plain values, which wdss never loads"
+        ) from None
+
+
 def load_weights(path: str | Path, what: str) -> dict[str, Any]:
     """A state dict file named by the config key ``what`` (published or local weights: LPIPS, Real-ESRGAN), opened
     weights-only; anything else gets one sentence naming the key and the file, never torch's advice to retry with
@@ -44,15 +59,7 @@ def load_weights(path: str | Path, what: str) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"{what}={path} is not a file")
-    if not zipfile.is_zipfile(path):  # every torch.save since 1.6 writes a zip archive
-        raise CheckpointError(f"{what}={path} is not a torch weight file (torch.save writes a zip archive)")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as err:
-        raise CheckpointError(
-            f"{what}={path} cannot be read as weights ({type(err).__name__}): it is damaged or holds objects other "
-            "than tensors and plain values, which wdss never loads"
-        ) from None
+    state = _load_archive(path, f"{what}={path}", "torch weight file", "torch.save writes one")
     if not isinstance(state, dict):
         raise CheckpointError(f"{what}={path} holds a {type(state).__name__}, not a state dict")
     return state
@@ -64,15 +71,7 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"checkpoint {path} is not a file{_nearby(path)}")
-    if not zipfile.is_zipfile(path):  # torch.save and Lightning write zip archives
-        raise CheckpointError(f"{path} is not a checkpoint: not a torch archive (a .ckpt that wdss.train writes)")
-    try:
-        checkpoint = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-    except Exception as err:  # torch's own message may advise weights_only=False: never repeat it
-        raise CheckpointError(
-            f"{path} cannot be read as a checkpoint ({type(err).__name__}): it is damaged or holds objects "
-            "other than tensors and plain values, which wdss never loads"
-        ) from None
+    checkpoint = _load_archive(path, str(path), "checkpoint", "a .ckpt that wdss.train writes", mmap=True)
     hparams = checkpoint.get("hyper_parameters") if isinstance(checkpoint, dict) else None
     if not isinstance(hparams, dict) or "state_dict" not in checkpoint or "net" not in hparams:
         raise CheckpointError(f"{path} is not a checkpoint written by wdss.train (no state_dict and model config)")

@@ -170,9 +170,7 @@ def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
     run_id = _recorded(ckpt.parent.parent, RUN_ID_FILE)
     # A run still training (in its own folder, or resumed into a later one) keeps its MLflow run: two writers would
     # interleave their metrics and each end it with its own status.
-    writers = [ckpt.parent.parent] + [
-        f.parent for f in log_dir.glob(f"**/{RUN_ID_FILE}") if run_id and _recorded(f.parent, RUN_ID_FILE) == run_id
-    ]
+    writers = [ckpt.parent.parent] + _folders_of_run(log_dir, run_id)
     for run_dir in dict.fromkeys(writers) if not _other_rank() else ():  # rank 0 checked it for the job
         pid = training_pid(run_dir)
         if pid is not None:
@@ -186,6 +184,13 @@ def _resume(cfg: DictConfig) -> tuple[str | None, str | None]:
     return str(ckpt), run_id
 
 
+def _folders_of_run(log_dir: Path, run_id: str | None) -> list[Path]:
+    """The run folders under ``log_dir`` that logged to MLflow run ``run_id`` (it started there, or resumed)."""
+    if not run_id:
+        return []
+    return [f.parent for f in log_dir.glob(f"**/{RUN_ID_FILE}") if _recorded(f.parent, RUN_ID_FILE) == run_id]
+
+
 def _own_checkpoint(path: str, cfg: DictConfig, run_id: str | None) -> str:
     """``path`` (the best checkpoint a resumed callback state names) if it lies in a checkpoints folder of this MLflow
     run (this folder, or one it resumed), else "" with a warning: the test never loads another run's file."""
@@ -193,12 +198,7 @@ def _own_checkpoint(path: str, cfg: DictConfig, run_id: str | None) -> str:
         return ""
     log_dir = Path(str(cfg.paths.log_dir))
     folders = {Path(str(cfg.paths.output_dir)).resolve() / "checkpoints"}
-    if run_id:
-        folders |= {
-            f.parent.resolve() / "checkpoints"
-            for f in log_dir.glob(f"**/{RUN_ID_FILE}")
-            if _recorded(f.parent, RUN_ID_FILE) == run_id
-        }
+    folders |= {folder.resolve() / "checkpoints" for folder in _folders_of_run(log_dir, run_id)}
     if Path(path).resolve().parent in folders:
         return path
     print(f"wdss.train: WARNING: the best checkpoint the state names, {path}, is not one of this run's: testing the "
