@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -498,19 +499,21 @@ def eval_config(ckpt: Path, out: Path, *overrides: str):
     )
 
 
-def test_eval_rebuilds_from_the_checkpoint_and_logs_under_the_training_run(tmp_path, tracking):
+def test_eval_rebuilds_from_the_checkpoint_and_logs_under_the_training_run(tmp_path, tracking, capsys):
     from wdss.eval import evaluate
 
     train(compose_train(["experiment=smoke", "variant=dwt_haar", "test=false"], tmp_path))
     ckpt = tmp_path / "run" / "checkpoints" / "last.ckpt"
     [trained] = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])
     metrics = evaluate(eval_config(ckpt, tmp_path / "eval", "data.test_scales=[2.0,2.5]", "write_outputs=true"))
+    assert "was trained on" not in capsys.readouterr().out  # the data it was trained on: nothing to say
     assert {"test/psnr_2x", "test/psnr_2.5x", "bench/ms_per_frame"} <= set(metrics)
     [evaluation] = tracking.search_runs(
         [trained.info.experiment_id], f"tags.mlflow.parentRunId = '{trained.info.run_id}'"
     )
     assert evaluation.info.status == "FINISHED" and "test/psnr_2.5x" in evaluation.data.metrics
     assert evaluation.data.tags["ckpt_path"] == str(ckpt.resolve())
+    assert evaluation.info.run_name == "eval last.ckpt · tests/fixtures/rendered"  # named by checkpoint and data
     assert (
         evaluation.data.tags["overrides"]
         == trained.data.tags["overrides"]
@@ -528,6 +531,10 @@ def test_eval_rebuilds_from_the_checkpoint_and_logs_under_the_training_run(tmp_p
     assert tracking.get_run(trained.info.run_id).info == trained.info  # status and end time as training left them
     frames = sorted(p.name for p in (tmp_path / "eval" / "run" / "frames").iterdir())
     assert "fixture_000_0001_2.5x.exr" in frames and "fixture_000_0001_2.5x.png" in frames
+    # eval tests on the data its own config names, which need not be the training run's: it says so
+    shutil.copytree(Path("tests/fixtures/rendered"), tmp_path / "elsewhere")
+    evaluate(eval_config(ckpt, tmp_path / "eval2", f"data.root={tmp_path / 'elsewhere'}", "data.test_scales=[2.0]"))
+    assert "was trained on tests/fixtures/rendered" in capsys.readouterr().out
 
 
 def test_eval_logs_temporal_metrics_per_frame_histories_and_videos_of_each_test_sequence(tmp_path, tracking):

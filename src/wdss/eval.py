@@ -103,6 +103,12 @@ def _eval_logger(cfg: DictConfig, ckpt: Path) -> Any:
             )
         else:
             tags["mlflow.parentRunId"] = training
+            trained_on = run.data.tags.get("train_data_root") or run.data.tags.get("data_root")
+            if trained_on and trained_on != tags.get("data_root"):  # eval's data is its own config's, not the run's
+                print(
+                    f"wdss.eval: testing on the test split of {tags.get('data_root')}; {ckpt} was trained on "
+                    f"{trained_on} (data=... data.root=... choose what is tested)"
+                )
             # What was trained (variant, model, seed, ...), so that a report groups evaluations as their trainings.
             tags.update({k: v for k, v in run.data.tags.items() if k in (*GROUPS, "seed") and k != "data"})
             # (runs from before the tag existed were named by their overrides)

@@ -373,13 +373,15 @@ class SuperResolutionModule(L.LightningModule):
         run_id = getattr(self.logger, "run_id", None)
         if experiment is None or run_id is None or not hasattr(experiment, "log_image"):
             return
-        panel = comparison_panel(batch, out, self.tone)
+        from wdss.video import labelled  # the eval videos' captions: one reading of every panel wdss writes
+
+        panel = labelled(comparison_panel(batch, out, self.tone))
         experiment.log_image(run_id, panel, artifact_file=f"images/val_epoch{self.current_epoch:03d}.png")
         coefficients = out.get("coefficients")
         if coefficients is not None:
             experiment.log_image(
                 run_id,
-                subband_panel(coefficients[0]),
+                labelled(subband_panel(coefficients[0]), SUBBAND_LABELS),
                 artifact_file=f"images/subbands_epoch{self.current_epoch:03d}.png",
             )
 
@@ -434,8 +436,12 @@ def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None],
     return (row.permute(1, 2, 0).cpu().numpy() * 255).round().astype(np.uint8)
 
 
+SUBBAND_LABELS = ("LL (own range)", "LH", "HL", "HH (0.5 = zero)")
+
+
 def subband_panel(coefficients: Tensor):
-    """The four subbands of the first image, side by side, each scaled to its own range (uint8)."""
+    """The four subbands of the first image, side by side, each scaled to its own range (uint8): LL from 0 to its
+    largest magnitude, the detail bands around grey 0.5 for zero (:data:`SUBBAND_LABELS`)."""
     import numpy as np
 
     bands = coefficients.detach().float().view(4, -1, *coefficients.shape[-2:])[:, :3]
