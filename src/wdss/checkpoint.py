@@ -16,7 +16,7 @@ from typing import Any
 import torch
 from omegaconf import OmegaConf
 
-from wdss.config.targets import TargetRefused, check_targets, refuse_interpolation
+from wdss.config.targets import TargetRefused, check_targets, moved, refuse_interpolation
 from wdss.errors import UserError
 
 __all__ = ["CheckpointError", "load_weights", "read_checkpoint", "training_preprocessing"]
@@ -81,7 +81,7 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
             raise CheckpointError(f"checkpoint {path} holds {key!r}, which wdss.train never writes: refused")
     try:
         refuse_interpolation(hparams, "hyper_parameters")  # nothing in a checkpoint is resolved
-        check_targets(hparams, "hyper_parameters")
+        check_targets(moved(hparams), "hyper_parameters")  # a checkpoint of the layout before the move too
     except TargetRefused as err:
         raise CheckpointError(f"checkpoint {path}: {err}") from err
     return checkpoint

@@ -34,12 +34,14 @@ __all__ = [
     "ALLOWED",
     "KINDS",
     "LOGGING",
+    "MOVED",
     "SLOTS",
     "InterpolationRefused",
     "TargetRefused",
     "check_config",
     "check_targets",
     "instantiate",
+    "moved",
     "refuse_interpolation",
     "resolve",
     "slot_kind",
@@ -92,6 +94,22 @@ KINDS: Mapping[str, Mapping[str, tuple[str, ...]]] = {
         "hydra_plugins.hydra_submitit_launcher.submitit_launcher": ("LocalLauncher", "SlurmLauncher"),
     },
     "Hydra sweeper": {"hydra._internal.core_plugins.basic_sweeper": ("BasicSweeper",)},
+}
+# Dotted paths of the layout before issue 39's move (``wdss.model.*``) -> where those callables live now. Checkpoints
+# written before the move store the old paths: :func:`moved` renames them in a checkpoint's hyper-parameters before
+# they are checked and built. A path not listed here is checked as it stands.
+MOVED: Mapping[str, str] = {
+    "wdss.model.module.SuperResolutionModule": "wdss.training.module.SuperResolutionModule",
+    "wdss.model.network.WDSSNet": "wdss.nets.wdss.network.WDSSNet",
+    "wdss.model.baselines.Upsample": "wdss.nets.upsamplers.baselines.Upsample",
+    "wdss.model.joint_bilateral.JointBilateralUpsample": "wdss.nets.upsamplers.joint_bilateral.JointBilateralUpsample",
+    "wdss.model.learned_bilateral.LearnedBilateralUpsample": (
+        "wdss.nets.upsamplers.learned_bilateral.LearnedBilateralUpsample"
+    ),
+    "wdss.model.rrdbnet.RRDBNet": "wdss.nets.comparison.rrdbnet.RRDBNet",
+    "wdss.model.nsrr.NSRR": "wdss.nets.comparison.nsrr.NSRR",
+    "wdss.model.fusesr.FuseSR": "wdss.nets.comparison.fusesr.FuseSR",
+    "wdss.averaging.EMAWeightAveraging": "wdss.callbacks.averaging.EMAWeightAveraging",
 }
 # The classes and factories (``class:``, ``()``) that Hydra's logging configs may name (logging.config.dictConfig
 # builds them with their keys as arguments: any class would do, subprocess.Popen included).
@@ -255,6 +273,19 @@ def _has_interpolation(node: Any) -> bool:
     if isinstance(node, list | tuple):
         return any(_has_interpolation(v) for v in node)
     return False
+
+
+def moved(node: Any) -> Any:
+    """``node`` (plain containers, as a checkpoint stores them) with every ``_target_`` that :data:`MOVED` lists
+    renamed to where it lives now; everything else as it was."""
+    if isinstance(node, Mapping):
+        return {
+            name: MOVED.get(value, value) if name == "_target_" and isinstance(value, str) else moved(value)
+            for name, value in node.items()
+        }
+    if isinstance(node, list | tuple):
+        return type(node)(moved(value) for value in node)
+    return node
 
 
 def refuse_interpolation(node: Any, key: str = "") -> None:

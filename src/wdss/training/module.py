@@ -16,7 +16,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from torch import Tensor, nn
 
-from wdss.config.targets import check_targets, instantiate, refuse_interpolation
+from wdss.config.targets import check_targets, instantiate, moved, refuse_interpolation
 from wdss.data.preprocess import prediction_color, target_irradiance
 from wdss.ops.tonemap import ToneMap
 from wdss.ops.warp import warp_backward
@@ -81,6 +81,7 @@ class SuperResolutionModule(L.LightningModule):
         }
         if not isinstance(net, nn.Module):
             hparams["net"] = _plain(net)
+        hparams = moved(hparams)  # a checkpoint written before the layout's move names its network by the old path
         # A checkpoint's hyper-parameters are data: a config's interpolations were resolved above (_plain, or by
         # the instantiate that built this module), so one left is refused, as is a target off its slot's list,
         # before anything is built.
