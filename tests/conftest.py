@@ -9,9 +9,9 @@ os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
 
 @pytest.fixture
 def tail_calls(monkeypatch) -> list:
-    """The shapes of ``merged`` each time the SWT network computes its tail on cells (wdss.model.polyphase)."""
-    import wdss.model.network as network
-    from wdss.model.polyphase import swt_tail_on_cells
+    """The shapes of ``merged`` each time the SWT network computes its tail on cells (wdss.nets.wdss.polyphase)."""
+    import wdss.nets.wdss.network as network
+    from wdss.nets.wdss.polyphase import swt_tail_on_cells
 
     calls = []
 

@@ -8,7 +8,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from wdss.model.network import WIDTHS
+from wdss.nets.wdss.network import WIDTHS
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 # variant -> the size/ entry its model reads; None: plain WDSS (the default model).

@@ -46,8 +46,8 @@ def one_process_metrics(tmp_path: Path, ckpt: Path) -> dict[str, float]:
     """Validation and test of ``ckpt`` in this process, on every frame the DDP ranks shared."""
     import lightning as L
 
-    from wdss.model.module import SuperResolutionModule
-    from wdss.targets import instantiate
+    from wdss.config.targets import instantiate
+    from wdss.training.module import SuperResolutionModule
 
     cfg = compose_train(["experiment=smoke"], tmp_path / "single")
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)

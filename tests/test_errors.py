@@ -8,11 +8,11 @@ import logging
 import pytest
 
 from wdss.checkpoint import CheckpointError
+from wdss.config.targets import TargetRefused
 from wdss.data.exr import ExrError
 from wdss.data.layouts import SceneError
 from wdss.errors import ConfigError, UserError, one_line_errors
 from wdss.export import ExportError
-from wdss.targets import TargetRefused
 from wdss.upscale import UpscaleError
 
 

@@ -11,11 +11,11 @@ import torch
 from hydra import compose, initialize_config_dir
 from onnx import numpy_helper
 
-from tests.model.helpers import fixture_batches, tiny_checkpoint
+from tests.helpers import fixture_batches, tiny_checkpoint
 from tests.test_train import run_module
 from wdss.export import MOTION_VECTORS, ExportError, export, relative_error, run_onnx
-from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
+from wdss.training.module import SuperResolutionModule
 
 CONFIGS = {
     "none": ["transform=none"],

@@ -172,7 +172,7 @@ def test_every_sweep_job_composes_and_validates(sweep, tmp_path, monkeypatch):
 
 def test_baseline_rows_replace_the_model_of_an_experiment(tmp_path):
     cfg = compose_train(["experiment=smoke", "variant=bicubic"], tmp_path)
-    assert cfg.model.net._target_ == "wdss.model.baselines.Upsample" and cfg.model.net.mode == "bicubic"
+    assert cfg.model.net._target_ == "wdss.nets.upsamplers.baselines.Upsample" and cfg.model.net.mode == "bicubic"
 
 
 def test_joint_bilateral_is_a_baseline_row(tmp_path):
@@ -390,7 +390,7 @@ def test_the_test_after_a_resume_loads_only_a_checkpoint_of_its_own_run(tmp_path
 
 
 def test_resuming_a_run_another_tracking_store_holds_is_refused_in_one_line(tmp_path, tracking):
-    from tests.test_targets import UPSAMPLE, crafted_checkpoint
+    from tests.config.test_targets import UPSAMPLE, crafted_checkpoint
 
     last = fake_run(tmp_path, "a", "experiment=smoke", started=1000, checkpointed=1100)  # MLflow run id-a, elsewhere
     crafted_checkpoint(tmp_path, UPSAMPLE).replace(last)  # a readable checkpoint: what ckpt_path=last reads first
@@ -406,7 +406,7 @@ def test_last_ckpt_is_written_every_epoch_and_when_sigterm_lands_in_validation(t
 
     import torch
 
-    from wdss.model.module import SuperResolutionModule
+    from wdss.training.module import SuperResolutionModule
 
     validation_step = SuperResolutionModule.validation_step
 
@@ -428,7 +428,7 @@ def test_last_ckpt_is_written_every_epoch_and_when_sigterm_lands_in_validation(t
 def test_ctrl_c_ends_the_run_killed_with_the_resume_hint(tmp_path, tracking, monkeypatch, capsys):
     import signal
 
-    from wdss.model.module import SuperResolutionModule
+    from wdss.training.module import SuperResolutionModule
 
     training_step = SuperResolutionModule.training_step
 
@@ -573,7 +573,7 @@ def test_eval_logs_temporal_metrics_per_frame_histories_and_videos_of_each_test_
 
 def test_a_failed_eval_leaves_the_training_run_as_it_was(tmp_path, tracking, monkeypatch):
     from wdss.eval import evaluate
-    from wdss.model.module import SuperResolutionModule
+    from wdss.training.module import SuperResolutionModule
 
     train(compose_train(["experiment=smoke", "variant=dwt_haar", "test=false", "bench=null"], tmp_path))
     [trained] = tracking.search_runs([tracking.get_experiment_by_name("wdss").experiment_id])

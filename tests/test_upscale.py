@@ -13,12 +13,12 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf, open_dict
 from PIL import Image
 
-from tests.model.helpers import fixture_batches, tiny_checkpoint
+from tests.helpers import fixture_batches, tiny_checkpoint
 from tests.test_train import compose_train, run_module
 from wdss.data.layouts import Sequence
 from wdss.data.synthetic import write_sequence
-from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR, PROJECT_ROOT
+from wdss.training.module import SuperResolutionModule
 from wdss.upscale import UpscaleError, scale_warning, upscale
 
 FIXTURE = PROJECT_ROOT / "tests" / "fixtures" / "rendered" / "fixture_000"

@@ -20,10 +20,10 @@ from rich.console import Console
 from rich.table import Table
 
 from wdss.data.preprocess import prediction_color
-from wdss.data.sampling import upsample as upsample_lr
 from wdss.memory import memory_retained, restart_with_retained_memory
-from wdss.model.blocks import from_log, to_log
-from wdss.model.joint_bilateral import joint_bilateral_upsample
+from wdss.nets.blocks import from_log, to_log
+from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
+from wdss.ops.sampling import upsample as upsample_lr
 
 BASES = ("haar", "db4", "sym4")
 TABLE_WIDTH = 160  # columns of a table printed off a terminal
@@ -138,8 +138,8 @@ def _training_module(widths: str):
     from hydra import compose, initialize_config_dir
     from hydra.core.hydra_config import HydraConfig
 
+    from wdss.config.targets import instantiate
     from wdss.paths import CONF_DIR
-    from wdss.targets import instantiate
 
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose("train", overrides=[f"size={widths}"], return_hydra_config=True)
@@ -295,8 +295,8 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     network timed in the same interleaved rounds: :func:`interleaved_ms`)."""
     import inspect
 
-    from wdss.model.network import HEADS, WIDTHS, WDSSNet
-    from wdss.model.profile import dummy_inputs, flops
+    from wdss.nets.profile import dummy_inputs, flops
+    from wdss.nets.wdss.network import HEADS, WIDTHS, WDSSNet
 
     height, width = size
     kwargs = {} if widths == "paper" else WIDTHS["small"]
@@ -348,10 +348,10 @@ DFASR = dict(
 
 def comparison_models(widths: str) -> dict:
     """DFASR, Real-ESRGAN, NSRR and FuseSR (x2) at the given widths, for the inference table."""
-    from wdss.model.fusesr import FuseSR
-    from wdss.model.network import WIDTHS, WDSSNet
-    from wdss.model.nsrr import NSRR
-    from wdss.model.rrdbnet import RRDBNet
+    from wdss.nets.comparison.fusesr import FuseSR
+    from wdss.nets.comparison.nsrr import NSRR
+    from wdss.nets.comparison.rrdbnet import RRDBNet
+    from wdss.nets.wdss.network import WIDTHS, WDSSNet
 
     small = widths != "paper"
     return {
@@ -423,7 +423,7 @@ def _inference_runners(
     ``tmp``). ``dtype`` float16 or bfloat16 runs the graph and its inputs in that precision (the ONNX graph in float16
     as the fp16 export writes it; onnxruntime's CPU provider has no bfloat16 convolutions)."""
     from wdss.export import export_onnx, relative_error
-    from wdss.model.module import SuperResolutionModule
+    from wdss.training.module import SuperResolutionModule
 
     # The export folds RIR blocks in place and returns the graph every backend runs: network + remodulation.
     graph, inputs, reference = export_onnx(
@@ -435,7 +435,7 @@ def _inference_runners(
         graph = copy.deepcopy(graph).to(dtype)
         inputs = {k: v if k == "scale" else v.to(dtype) for k, v in inputs.items()}
     # torch runs the graph channels-last, the layout engines feed: oneDNN's convolutions then skip their reorders
-    # (eager none at 1080p 2x: 5162 vs 6864 ms), and the SWT head computes its tail on cells (wdss.model.polyphase).
+    # (eager none at 1080p 2x: 5162 vs 6864 ms), and the SWT head computes its tail on cells (wdss.nets.wdss.polyphase).
     graph = graph.to(device, memory_format=torch.channels_last)
     inputs = {k: v.to(device, memory_format=torch.channels_last) if v.dim() == 4 else v for k, v in inputs.items()}
     runners: dict[str, Callable[[], object]] = {}
@@ -545,7 +545,7 @@ def bench_inference(
     """
     import tempfile
 
-    from wdss.model.network import WDSSNet
+    from wdss.nets.wdss.network import WDSSNet
 
     if not backends:
         backends = BACKENDS if device == "cpu" else GPU_BACKENDS
@@ -628,7 +628,7 @@ def bench_render(
     sequence's auto exposure, and seconds per frame. Needs the ``render`` extra."""
     import numpy as np
 
-    from wdss.data.tonemap import hable
+    from wdss.ops.tonemap import hable
     from wdss.render.blender import BlenderScene
     from wdss.render.exposure import auto_exposure
     from wdss.render.spec import random_scene
@@ -771,8 +771,8 @@ def _learn_setup(overrides: Sequence[str], seed: int) -> tuple:
     from hydra import compose, initialize_config_dir
     from hydra.core.hydra_config import HydraConfig
 
+    from wdss.config.targets import instantiate
     from wdss.paths import CONF_DIR
-    from wdss.targets import instantiate
 
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         preset = [] if any(o.startswith("experiment=") for o in overrides) else ["experiment=cpu"]
@@ -914,13 +914,13 @@ def bench_learn(
 
 def band_limited(image: torch.Tensor, scale: float) -> torch.Tensor:
     """The orthogonal projection of ``image`` (..., H, W) onto the images the LR grid of ``scale`` can hold
-    (:func:`wdss.data.sampling.lr_size`, ``h x w``): its orthonormal 2-D DCT-II with every coefficient at row index
+    (:func:`wdss.ops.sampling.lr_size`, ``h x w``): its orthonormal 2-D DCT-II with every coefficient at row index
     >= ``h`` or column index >= ``w`` set to zero. Of all such images it is the nearest in squared error (Parseval),
     so its PSNR against ``image`` bounds any upsampler whose output has no content above the LR grid's frequencies;
     the DCT's even extension keeps the frame's borders from leaking in as a periodic FFT's wrap-around would."""
     from scipy.fft import dctn, idctn
 
-    from wdss.data.sampling import lr_size
+    from wdss.ops.sampling import lr_size
 
     array = image.detach().double().cpu().numpy()
     coefficients = dctn(array, axes=(-2, -1), norm="ortho")
@@ -943,8 +943,8 @@ def bench_bandlimit(
     without predicting detail the LR grid cannot hold. Every frame by default, as the data module tests a model that
     reads no previous frame; ``skip_first``: without the first, as it tests one that does."""
     from wdss.data.layouts import discover_sequences
-    from wdss.data.tonemap import ToneMap
-    from wdss.model.metrics import psnr
+    from wdss.ops.tonemap import ToneMap
+    from wdss.training.metrics import psnr
 
     tone = ToneMap(tonemap_name, exposure)
     table = Table(title=f"bandlimit: PSNR (dB) of the target against its projection on the LR grid, {tonemap_name}")
@@ -983,10 +983,10 @@ def bench_guidance(
     from wdss.data.layouts import discover_sequences
     from wdss.data.preprocess import Preprocessing
     from wdss.data.properties import PROPERTIES, with_properties
-    from wdss.model.baselines import Upsample
-    from wdss.model.joint_bilateral import JointBilateralUpsample
-    from wdss.model.metrics import ImageMetrics
-    from wdss.model.module import SuperResolutionModule
+    from wdss.nets.upsamplers.baselines import Upsample
+    from wdss.nets.upsamplers.joint_bilateral import JointBilateralUpsample
+    from wdss.training.metrics import ImageMetrics
+    from wdss.training.module import SuperResolutionModule
 
     chosen = {p: list(PROPERTIES) if p == "all" else [] if p == "none" else p.split("+") for p in properties}
     for parts in chosen.values():

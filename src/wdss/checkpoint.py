@@ -3,7 +3,7 @@
 A file that is not a checkpoint gets one sentence naming it, never torch's hint to retry with
 ``weights_only=False`` (which would run whatever the file holds); a checkpoint whose stored model config holds an
 interpolation (``${oc.create:{_target_: ...}}`` builds whatever it names once resolved), or names a callable
-outside its slot's allowlist (:mod:`wdss.targets`), is refused before any of it is built. The same holds for what
+outside its slot's allowlist (:mod:`wdss.config.targets`), is refused before any of it is built. The same holds for what
 is read from the run folder beside it (``.hydra/config.yaml``'s ``data.preprocessing``).
 """
 
@@ -16,8 +16,8 @@ from typing import Any
 import torch
 from omegaconf import OmegaConf
 
+from wdss.config.targets import TargetRefused, check_targets, moved, refuse_interpolation
 from wdss.errors import UserError
-from wdss.targets import TargetRefused, check_targets, refuse_interpolation
 
 __all__ = ["CheckpointError", "load_weights", "read_checkpoint", "training_preprocessing"]
 
@@ -81,7 +81,7 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
             raise CheckpointError(f"checkpoint {path} holds {key!r}, which wdss.train never writes: refused")
     try:
         refuse_interpolation(hparams, "hyper_parameters")  # nothing in a checkpoint is resolved
-        check_targets(hparams, "hyper_parameters")
+        check_targets(moved(hparams), "hyper_parameters")  # a checkpoint of the layout before the move too
     except TargetRefused as err:
         raise CheckpointError(f"checkpoint {path}: {err}") from err
     return checkpoint

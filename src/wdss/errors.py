@@ -178,7 +178,7 @@ def check_built(
 ) -> None:
     """Compose the config as Hydra will (its own parser: ``-cd``, ``-cn``, ``--multirun``), with its ``hydra``
     node, and answer anything that Hydra or wdss would build outside its slot's allowlist
-    (:func:`wdss.targets.check_config`: hydra.callbacks, launcher, sweeper and logging classes too) with one line
+    (:func:`wdss.config.targets.check_config`: hydra.callbacks, launcher, sweeper and logging classes too) with one line
     naming the key, exit status 2: Hydra builds its callbacks and logging before any task code runs. A command
     line Hydra cannot parse or compose is left to Hydra, which reports it."""
     from hydra._internal.hydra import Hydra
@@ -187,7 +187,7 @@ def check_built(
     from hydra.types import RunMode
     from omegaconf import OmegaConf
 
-    from wdss.targets import TargetRefused, check_config
+    from wdss.config.targets import TargetRefused, check_config
 
     if GlobalHydra.instance().is_initialized():
         return  # inside a Hydra app (a test or a notebook that composed already)

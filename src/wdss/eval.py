@@ -19,15 +19,15 @@ import lightning as L
 import numpy as np
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from wdss.callbacks.progress_bar import progress_callbacks
 from wdss.checkpoint import read_checkpoint, training_preprocessing
+from wdss.config.targets import check_targets, instantiate
 from wdss.data.exr import write_exr
 from wdss.errors import entry_point
 from wdss.logfile import log_files_to_mlflow
-from wdss.model.module import SuperResolutionModule
 from wdss.paths import CONF_DIR
-from wdss.progress_bar import progress_callbacks
-from wdss.targets import check_targets, instantiate
 from wdss.tracking import GROUPS, RUN_ID_FILE, data_tags, ensure_experiment, prepare_store, run_links
+from wdss.training.module import SuperResolutionModule
 
 __all__ = ["WritePredictions", "evaluate", "main"]
 
@@ -160,7 +160,7 @@ def _as_trained(cfg: DictConfig, ckpt: Path) -> None:
 
 def evaluate(cfg: DictConfig) -> dict[str, float]:
     ckpt = Path(str(cfg.ckpt_path))
-    # Both the config and the checkpoint's stored model config build only allowlisted callables (wdss.targets).
+    # Both the config and the checkpoint's stored model config build only allowlisted callables (wdss.config.targets).
     check_targets(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
     read_checkpoint(ckpt)
     _as_trained(cfg, ckpt)

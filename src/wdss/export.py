@@ -30,13 +30,13 @@ from torch import Tensor, nn
 from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.data.dataset import GBUFFER_STACK, Preprocessing
 from wdss.data.preprocess import LR_GUIDE
-from wdss.data.sampling import lr_size, point_sample
-from wdss.data.tonemap import MIDDLE_GREY
 from wdss.errors import UserError, entry_point
-from wdss.model.blocks import RIRBlock, fold_rir_blocks
-from wdss.model.module import SuperResolutionModule
-from wdss.model.profile import dummy_inputs
+from wdss.nets.blocks import RIRBlock, fold_rir_blocks
+from wdss.nets.profile import dummy_inputs
+from wdss.ops.sampling import lr_size, point_sample
+from wdss.ops.tonemap import MIDDLE_GREY
 from wdss.paths import CONF_DIR
+from wdss.training.module import SuperResolutionModule
 
 __all__ = ["ExportError", "InferenceGraph", "export", "export_onnx", "fold_constants", "input_layout", "main"]
 
@@ -73,7 +73,7 @@ CHANNELS: dict[str, tuple[str, list[str], str]] = {
     "brdf": (
         "high",
         list(_RGB),
-        "HR BRDF factor (wdss.data.brdf.safe_brdf of F at preprocessing.brdf_knee): color = irradiance * brdf",
+        "HR BRDF factor (wdss.ops.brdf.safe_brdf of F at preprocessing.brdf_knee): color = irradiance * brdf",
     ),
     "gbuffer": ("high", [c for b in GBUFFER_STACK for c in _channels(b)], "HR G-buffer stack"),
     "spatial_mask": (
@@ -96,13 +96,13 @@ CHANNELS: dict[str, tuple[str, list[str], str]] = {
 }
 
 
-# Motion vectors as wdss's data holds them (wdss.data.warp, wdss.render.convert) and every history is warped with.
+# Motion vectors as wdss's data holds them (wdss.ops.warp, wdss.render.convert) and every history is warped with.
 MOTION_VECTORS = {
     "units": "HR pixels",
     "sign": "current minus previous screen position (x right, y up)",
     "warp": (
         "the pixel at column x, row y (rows down) of this frame was at column x - mv.x, row y + mv.y of the previous "
-        "frame: wdss.data.warp.warp_backward samples the previous frame there, bilinearly at pixel centres "
+        "frame: wdss.ops.warp.warp_backward samples the previous frame there, bilinearly at pixel centres "
         "(grid_sample, align_corners=False), zeros outside the frame"
     ),
 }
@@ -152,7 +152,7 @@ def _temporal(module: SuperResolutionModule, graph: InferenceGraph, prep: Prepro
         "temporal_mask": (
             "the previous frame's depth, albedo and normal warped as its irradiance (bilinear, zeros outside, "
             "normals renormalised: zero stays zero, a normal term of 0.5), compared with this frame's: "
-            "|depth - depth'|, |albedo - albedo'| per channel, (1 - n . n') / 2 (wdss.data.warp.temporal_mask)"
+            "|depth - depth'|, |albedo - albedo'| per channel, (1 - n . n') / 2 (wdss.ops.warp.temporal_mask)"
         ),
     }
 
@@ -366,7 +366,7 @@ def input_layout(
             "emission_separated": prep.separates_emission,
             "brdf": {
                 "extranet": "F = base_color + (1 - metallic) * 0.08 * specular",
-                "split_sum": "F = base (1 - metallic) + F0 A + B, (A, B) = wdss.data.brdf.ggx_lut(NoV, roughness)",
+                "split_sum": "F = base (1 - metallic) + F0 A + B, (A, B) = wdss.ops.brdf.ggx_lut(NoV, roughness)",
             }[prep.brdf],
             "brdf_name": prep.brdf,
             # The factor divided by (lr, history) and multiplied by (brdf): safe_brdf(F, knee)
@@ -385,7 +385,7 @@ def input_layout(
             "spatial_mask": (
                 f"1 where |depth - up(depth_lr)| > {thresholds['depth']:g} or n . normalize(up(n_lr)) < "
                 f"{thresholds['normal']:g} or the mean over r, g, b of |base_color - up(base_color_lr)| > "
-                f"{thresholds['albedo']:g}, else 0 (wdss.data.warp.spatial_mask): the HR G-buffer against the LR "
+                f"{thresholds['albedo']:g}, else 0 (wdss.ops.warp.spatial_mask): the HR G-buffer against the LR "
                 "frame's own (lr_guide's channels), up = bilinear upsampling to the HR size (pixel centres aligned, "
                 "align_corners=False, border values beyond), depths preprocessed as depth says"
             ),
@@ -408,7 +408,7 @@ def input_layout(
         "display": {"tonemap": module.hparams.tonemap_name, "exposure": module.hparams.tonemap_exposure},
         "history": (
             "recurrent: the previous frame's irradiance output warped by this frame's motion vectors "
-            "(wdss.data.warp.warp_backward: bilinear, zeros outside); on the first frame, lr upsampled bilinearly "
+            "(wdss.ops.warp.warp_backward: bilinear, zeros outside); on the first frame, lr upsampled bilinearly "
             "(align_corners=False)"
             if recurrent
             else "the previous HR frame's irradiance, warped by the motion vectors: trained on the ground-truth "

@@ -9,8 +9,8 @@ a handler of its own, so each job's file holds only its own lines.
 
 On a terminal, a rich progress bar draws with control sequences and carriage returns: those are stripped and a
 redrawn line is logged as it ends. Lightning's rich bar writes to the terminal itself, :func:`console` (its rows
-would be logged at every redraw), and :mod:`wdss.progress_bar` logs its plain lines instead; what is printed while
-that bar is live reaches the terminal only.
+would be logged at every redraw), and :mod:`wdss.callbacks.progress_bar` logs its plain lines instead; what is printed
+while that bar is live reaches the terminal only.
 """
 
 from __future__ import annotations

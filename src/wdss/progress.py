@@ -2,7 +2,7 @@
 
 A pipe or log file shows no bar, so off a terminal a line ``<label>: <count>/<total> <text>`` is printed for
 every item that comes with a text, and, with ``every_s``, one every ``every_s`` seconds and at the end.
-Training's counterpart is :mod:`wdss.progress_bar`.
+Training's counterpart is :mod:`wdss.callbacks.progress_bar`.
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ artifacts of the parent run:
   than the seed, and the data root where the runs read several; named as the paper names its rows: ``SWT-db4``,
   ``No wavelet``, ``Bilinear (demod.)``), PSNR, SSIM,
   FLIP (and LPIPS when logged) and the temporal stability (the warping error's ratio to the target's own, best
-  closest to 1, and the temporal PSNR; :mod:`wdss.model.temporal_metrics`) at the table's scale, each
+  closest to 1, and the temporal PSNR; :mod:`wdss.training.temporal_metrics`) at the table's scale, each
   ``mean ± half-width`` of the 95% t-interval over the ``n`` seeds (``n/a`` with one seed), the best of each
   column in bold; a cell whose jobs failed says so instead of disappearing;
   below it, which of the paper's orderings hold at that scale (:data:`PAPER_ORDERINGS`: the PSNR difference of
@@ -519,7 +519,7 @@ def full_csv(rows: Sequence[str], metrics, notes: dict[str, str]) -> str:
 
 def metric_path(runs: Sequence) -> str:
     """How the metrics were measured, as the runs' parameters say: the tone map and its exposure."""
-    from wdss.data.tonemap import DEFAULT_EXPOSURE
+    from wdss.ops.tonemap import DEFAULT_EXPOSURE
 
     paths = set()
     for run in runs:
@@ -782,7 +782,7 @@ def qualitative_figure(client, groups: dict[str, list], path: Path, scale: str) 
 
     from wdss.video import centre_box
 
-    suffixes = ("", "_t1", "_t2")  # frames t, t+1, t+2 (wdss.model.module.SuperResolutionModule.test_step)
+    suffixes = ("", "_t1", "_t2")  # frames t, t+1, t+2 (wdss.training.module.SuperResolutionModule.test_step)
     images: dict[str, list] = {}
     target: list = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -13,9 +13,9 @@ import numpy as np
 import pywt
 import torch
 
-from wdss.data.brdf import BRDF_KNEE, demodulate, remodulate, safe_brdf
-from wdss.data.tonemap import hable
-from wdss.data.warp import spatial_mask, temporal_mask, warp_backward
+from wdss.ops.brdf import BRDF_KNEE, demodulate, remodulate, safe_brdf
+from wdss.ops.tonemap import hable
+from wdss.ops.warp import spatial_mask, temporal_mask, warp_backward
 from wdss.wavelets import analysis, synthesis
 
 __all__ = ["CASES", "Case", "run_cases"]
@@ -129,8 +129,8 @@ def _warp_cases() -> list[Case]:
 
 
 def _metric_cases() -> list[Case]:
-    from wdss.model.losses import WDSSLoss
-    from wdss.model.metrics import psnr, ssim
+    from wdss.training.losses import WDSSLoss
+    from wdss.training.metrics import psnr, ssim
 
     image = torch.rand(1, 3, 16, 16)
     zeros = torch.zeros(1, 3, 16, 16)
@@ -163,8 +163,8 @@ def _metric_cases() -> list[Case]:
 
 
 def _network_cases() -> list[Case]:
-    from wdss.data.sampling import lr_size
-    from wdss.model.network import WIDTHS, WDSSNet
+    from wdss.nets.wdss.network import WIDTHS, WDSSNet
+    from wdss.ops.sampling import lr_size
 
     torch.manual_seed(0)
     net = WDSSNet("swt", "db4", **WIDTHS["tiny"])
@@ -194,13 +194,13 @@ def _network_cases() -> list[Case]:
 
 
 def _autocast_cases() -> list[Case]:
-    from wdss.model.module import SuperResolutionModule
+    from wdss.training.module import SuperResolutionModule
 
     torch.manual_seed(0)
-    from wdss.model.network import WIDTHS
+    from wdss.nets.wdss.network import WIDTHS
 
     tiny = {k: list(v) if isinstance(v, tuple) else v for k, v in WIDTHS["tiny"].items()}
-    net = {"_target_": "wdss.model.network.WDSSNet", "transform": "swt", "basis": "db4", **tiny}
+    net = {"_target_": "wdss.nets.wdss.network.WDSSNet", "transform": "swt", "basis": "db4", **tiny}
     module = SuperResolutionModule(net, {"l1": 1.0, "ssim": 0.4, "wavelet": 0.1}, flip=False)
     h, w = 16, 16
     batch = {

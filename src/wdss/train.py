@@ -24,13 +24,13 @@ from hydra.types import RunMode
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 
+from wdss.callbacks.progress_bar import model_line, progress_callbacks
 from wdss.checkpoint import CheckpointError, read_checkpoint
+from wdss.config.targets import TargetRefused, check_targets, instantiate
 from wdss.distributed import use_rank_command
 from wdss.errors import ConfigError, entry_point
 from wdss.logfile import log_exception, log_files_to_mlflow
 from wdss.paths import CONF_DIR
-from wdss.progress_bar import model_line, progress_callbacks
-from wdss.targets import TargetRefused, check_targets, instantiate
 from wdss.tracking import (
     RUN_ID_FILE,
     ensure_experiment,
@@ -78,7 +78,7 @@ def _check_numbers(cfg: DictConfig) -> None:
 def validate(cfg: DictConfig) -> None:
     """Reject invalid combinations with one clear sentence each."""
     choices = HydraConfig.get().runtime.choices if HydraConfig.initialized() else {}
-    # A config builds only allowlisted callables (wdss.targets): a config file is not a way to run code.
+    # A config builds only allowlisted callables (wdss.config.targets): a config file is not a way to run code.
     try:
         check_targets(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
     except TargetRefused as err:
@@ -406,7 +406,7 @@ def log_noise_ceilings(module: Any, datamodule: Any, logger: Any) -> dict[str, f
     these targets. Only where the metrics' display transform is the one they were measured with (Hable at its
     default exposure, :mod:`wdss.render.noise`)."""
     from wdss.data.datamodule import SceneDataModule
-    from wdss.data.tonemap import DEFAULT_EXPOSURE
+    from wdss.ops.tonemap import DEFAULT_EXPOSURE
 
     tone = module.tone
     if not isinstance(datamodule, SceneDataModule) or tone.name != "hable":
@@ -438,7 +438,7 @@ def _stopped_by(error: BaseException) -> signal.Signals | None:
 def _bench(cfg: DictConfig, module: Any, logger: Any) -> dict[str, float]:
     """Inference cost at ``cfg.bench``: median ms and GFLOPs of one forward, logged as ``bench/*``, and tagged with
     the device, the output size and the process that timed it (the report compares only timings of one process)."""
-    from wdss.model.profile import PROCESS, device_name, dummy_inputs, flops, forward_ms
+    from wdss.nets.profile import PROCESS, device_name, dummy_inputs, flops, forward_ms
 
     bench = cfg.get("bench")
     if not bench:

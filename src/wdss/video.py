@@ -2,7 +2,7 @@
 
 :class:`SequenceVideos` (``video=true`` of ``wdss.eval`` and ``wdss.train``) writes, per test sequence and scale,
 ``<sequence>_<s>x.mp4``: LR (nearest-upsampled) | prediction | target | error x4, tone-mapped as the metrics see
-them (:func:`wdss.model.module.comparison_panel`), labelled, at the sequence's frame rate, H.264 through PyAV
+them (:func:`wdss.training.module.comparison_panel`), labelled, at the sequence's frame rate, H.264 through PyAV
 (which ships its own FFmpeg); and ``<sequence>_<s>x_crop.gif``: the same four tiles cropped to the centre
 square that the report's qualitative figure shows, enlarged, which the MLflow UI shows inline. Both are logged as
 artifacts of the run under ``videos/``.
@@ -150,7 +150,7 @@ class SequenceVideos(L.Callback):
     def on_test_batch_end(
         self, trainer: L.Trainer, pl_module: Any, outputs: Any, batch: Any, batch_idx: int, dataloader_idx: int = 0
     ) -> None:
-        from wdss.model.module import comparison_panel
+        from wdss.training.module import comparison_panel
 
         if not outputs or "shown" not in outputs:
             return

@@ -19,8 +19,8 @@ from wdss.data import (
     Sequence,
     point_sample,
 )
-from wdss.data.brdf import demodulate, extranet_brdf, safe_brdf
 from wdss.data.synthetic import write_sequence
+from wdss.ops.brdf import demodulate, extranet_brdf, safe_brdf
 
 HR = (24, 36)
 
@@ -520,7 +520,7 @@ def test_a_sequence_without_emission_emits_nothing_unless_emission_is_required(r
 def test_the_test_splits_noise_ceilings_are_read_from_the_records_and_logged_only_when_they_apply(tmp_path):
     from types import SimpleNamespace
 
-    from wdss.data.tonemap import ToneMap
+    from wdss.ops.tonemap import ToneMap
     from wdss.train import log_noise_ceilings
 
     for name, noise in (

@@ -7,14 +7,14 @@ import json
 import pytest
 import torch
 
-from tests.model.helpers import TINY
+from tests.helpers import TINY
 from wdss.data import Collate, FrameDataset, SceneError, Sequence
-from wdss.data.sampling import JITTER_PHASES, halton_jitter, upsample
 from wdss.data.synthetic import write_sequence
-from wdss.data.warp import spatial_mask
-from wdss.model.joint_bilateral import joint_bilateral_upsample
-from wdss.model.learned_bilateral import LearnedBilateralUpsample
-from wdss.model.network import FourierINR, WDSSNet
+from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
+from wdss.nets.upsamplers.learned_bilateral import LearnedBilateralUpsample
+from wdss.nets.wdss.network import FourierINR, WDSSNet
+from wdss.ops.sampling import JITTER_PHASES, halton_jitter, upsample
+from wdss.ops.warp import spatial_mask
 
 HR = (24, 36)
 JITTER = torch.tensor([[0.3, -0.2], [-0.45, 0.1], [0.0, 0.0]])

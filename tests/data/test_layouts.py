@@ -14,8 +14,8 @@ import torch
 
 from wdss.data import BUFFERS, ExrError, SceneError, Sequence, discover_sequences, read_exr, write_exr
 from wdss.data.layouts import DEFAULT_FRAME_RATE
-from wdss.data.sampling import point_sample
 from wdss.data.synthetic import synthetic_frame, write_sequence
+from wdss.ops.sampling import point_sample
 
 HR = (24, 36)
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "rendered" / "fixture_000"  # 24P is 48x24

@@ -24,7 +24,7 @@ from wdss.data import (
     tonemap,
     warp_backward,
 )
-from wdss.data.tonemap import gamma
+from wdss.ops.tonemap import gamma
 
 # ---------------------------------------------------------------------------------------------- BRDF
 

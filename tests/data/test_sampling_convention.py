@@ -12,7 +12,7 @@ from wdss.data import Collate, FrameDataset, SceneError, Sequence, point_sample
 from wdss.data.dataset import EpochSampler, draw_scale, parse_scale
 from wdss.data.preprocess import clean
 from wdss.data.synthetic import _write_unreal, synthetic_frame, write_sequence
-from wdss.model.joint_bilateral import joint_bilateral_upsample
+from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
 
 HR = (24, 36)
 KEYS = ["lr", "lr_guide", "gbuffer", "target"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wdss.data.tonemap import MIDDLE_GREY, luminance
+from wdss.ops.tonemap import MIDDLE_GREY, luminance
 from wdss.render.exposure import MAX_DARKENING, SATURATION, auto_exposure
 
 

@@ -145,7 +145,7 @@ def test_the_denoiser_keeps_texture_at_the_pixel_scale():
     """A fine checker (a few pixels a check) on a lit sphere and ground, at a target's size (over 200 pixels,
     where OIDN's prefilter was once on): 8 spp denoised as datasets are rendered keeps the checker's detail that
     64 spp without denoising shows (OIDN's prefilter blurred the albedo guide, and the colour lost it)."""
-    from wdss.data.tonemap import hable
+    from wdss.ops.tonemap import hable
     from wdss.render.blender import BlenderScene
     from wdss.render.exposure import auto_exposure
 
@@ -175,9 +175,9 @@ def test_a_native_render_records_its_convention_and_its_own_lr_gbuffer_guides_jo
     neighbour's surface, the LR frame's own G-buffer is the one its colour was shaded with."""
     from wdss.data import Collate, FrameDataset
     from wdss.data.preprocess import prediction_color
-    from wdss.data.tonemap import hable
-    from wdss.model.joint_bilateral import joint_bilateral_upsample
-    from wdss.model.metrics import psnr
+    from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
+    from wdss.ops.tonemap import hable
+    from wdss.training.metrics import psnr
 
     folder = render_sequence(
         tmp_path,
@@ -258,7 +258,7 @@ def test_a_jittered_lr_render_is_shaded_at_its_pixels_plus_the_jitter_and_record
     )  # fmt: skip
     meta = json.loads((folder / "sequence.json").read_text())
     assert meta["sampling"]["lr"]["16P"]["lr"] == "native" and "Halton" in meta["sampling"]["lr"]["16P"]["jitter"]
-    from wdss.data.sampling import halton_jitter
+    from wdss.ops.sampling import halton_jitter
 
     assert [f["lr_jitter"] for f in meta["frames"]] == [list(halton_jitter(f)) for f in range(3)]
     seq = Sequence(folder)

@@ -22,9 +22,9 @@ import numpy as np
 
 from wdss.data.layouts import BUFFERS, OPTIONAL_BUFFERS, SceneError
 from wdss.data.layouts import Sequence as Scene
-from wdss.data.sampling import scale_matches
-from wdss.data.tonemap import MIDDLE_GREY, luminance
 from wdss.errors import UserError
+from wdss.ops.sampling import scale_matches
+from wdss.ops.tonemap import MIDDLE_GREY, luminance
 
 __all__ = ["check_sequence", "main", "model_needs"]
 
@@ -34,7 +34,7 @@ def model_needs(ckpt: str | Path) -> tuple[list[str], dict[str, set[str]]]:
     ``prev``, ...), under the preprocessing it was trained with."""
     from wdss.checkpoint import read_checkpoint, training_preprocessing
     from wdss.data.dataset import Preprocessing, requirements
-    from wdss.model.module import SuperResolutionModule
+    from wdss.training.module import SuperResolutionModule
 
     read_checkpoint(ckpt)  # a file that is not a wdss checkpoint is named before torch opens it
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location="cpu", weights_only=True)

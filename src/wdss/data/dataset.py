@@ -25,7 +25,7 @@ from torch.utils.data import Dataset, Sampler
 
 from wdss.data.layouts import BUFFERS, SceneError, Sequence
 from wdss.data.preprocess import GBUFFER_STACK, LR_GUIDE, Preprocessing, RawBatch, brdf_of, build_batch
-from wdss.data.sampling import flip, flip_jitter, lr_size, scale_matches
+from wdss.ops.sampling import flip, flip_jitter, lr_size, scale_matches
 
 __all__ = [
     "BATCH_KEYS",

@@ -41,8 +41,8 @@ from wdss.data.cache import FrameCache
 from wdss.data.exr import read_exr, read_exr_size
 from wdss.data.preprocess import SANITIZE_ELSEWHERE
 from wdss.data.preprocess import depth_range as frame_depth_range
-from wdss.data.sampling import crop
 from wdss.errors import UserError
+from wdss.ops.sampling import crop
 
 __all__ = [
     "BUFFERS",

@@ -22,9 +22,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from wdss.data.brdf import BRDF_KNEE, demodulate, extranet_brdf, safe_brdf, split_sum_brdf
-from wdss.data.sampling import lr_size, point_sample
-from wdss.data.warp import normalize_normals, spatial_mask, temporal_mask, warp_backward
+from wdss.ops.brdf import BRDF_KNEE, demodulate, extranet_brdf, safe_brdf, split_sum_brdf
+from wdss.ops.sampling import lr_size, point_sample
+from wdss.ops.warp import normalize_normals, spatial_mask, temporal_mask, warp_backward
 
 __all__ = [
     "GBUFFER_STACK",
@@ -57,7 +57,7 @@ class Preprocessing:
     """How buffers become batch tensors (the ``data.preprocessing`` config)."""
 
     brdf: str = "extranet"  # extranet | split_sum
-    # F below about this blends continuously towards 1 (wdss.data.brdf.safe_brdf); 0: the hard switch at 1e-4,
+    # F below about this blends continuously towards 1 (wdss.ops.brdf.safe_brdf); 0: the hard switch at 1e-4,
     # which anti-aliased G-buffers break (every silhouette against the sky divides by ~0.01).
     brdf_knee: float = BRDF_KNEE
     demodulate: bool = True  # lr and history are irradiance (colour / F) rather than colour

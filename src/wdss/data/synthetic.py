@@ -19,7 +19,7 @@ import torch
 
 from wdss.data.exr import write_exr
 from wdss.data.layouts import DFASRLayout, UnrealLayout
-from wdss.data.sampling import lr_size, point_sample
+from wdss.ops.sampling import lr_size, point_sample
 
 __all__ = ["synthetic_frame", "write_sequence"]
 

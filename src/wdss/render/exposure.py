@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wdss.data.tonemap import MIDDLE_GREY, luminance  # the median aimed at: Hable maps 0.18 to 0.46
+from wdss.ops.tonemap import MIDDLE_GREY, luminance  # the median aimed at: Hable maps 0.18 to 0.46
 
 __all__ = ["MAX_DARKENING", "SATURATED_SHARE", "SATURATION", "auto_exposure"]
 

@@ -31,7 +31,7 @@ def measure_noise(scene: Any, folder: str | Path, exposure: float, frames: Frame
     ``mse`` (tone-mapped, target vs re-render), ``frames``, ``noise_seed``, ``seconds_per_frame`` and how it was
     measured. The scene's Cycles seed is restored afterwards."""
     from wdss.data.layouts import Sequence
-    from wdss.data.tonemap import hable
+    from wdss.ops.tonemap import hable
 
     sequence = Sequence(Path(folder))
     chosen = [int(f) for f in frames if f in sequence.frames]

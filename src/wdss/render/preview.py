@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from wdss.data.layouts import BUFFERS, Sequence  # noqa: E402
-from wdss.data.tonemap import hable  # noqa: E402
+from wdss.ops.tonemap import hable  # noqa: E402
 
 
 def preview(sequence_dir: str | Path, frame: int | None = None, out: str | Path | None = None) -> Path:

@@ -5,7 +5,7 @@ frame 1 has a previous frame (its motion vectors point to frame 0). Low-resoluti
 are either nearest-exact point samples of the high-resolution buffers (``lr_mode="downsample"``, as in the
 authors' data) or native renders at the lower resolution with point-sampled, aliased G-buffers
 (``lr_mode="native"``), each LR frame shaded at its pixel centres or, with ``lr_mode="jittered"``, at a
-per-frame sub-pixel jitter (:func:`wdss.data.sampling.halton_jitter`, recorded per frame as ``lr_jitter``), as
+per-frame sub-pixel jitter (:func:`wdss.ops.sampling.halton_jitter`, recorded per frame as ``lr_jitter``), as
 engines hand their upscalers. Motion vectors are in high-resolution pixels in every folder.
 
 Each file is written atomically (temporary name, then rename), so a killed render leaves no half-written
@@ -30,8 +30,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from wdss.data.exr import write_exr
 from wdss.data.layouts import SceneError, UnrealLayout
-from wdss.data.sampling import JITTER_PHASES, halton_jitter, lr_size, point_sample
 from wdss.errors import ConfigError
+from wdss.ops.sampling import JITTER_PHASES, halton_jitter, lr_size, point_sample
 from wdss.progress import duration
 from wdss.render.exposure import auto_exposure
 from wdss.render.scene_file import check_scene, file_digest

@@ -1,0 +1,44 @@
+"""Image-space baselines, evaluated through the same path as the networks (irradiance out, remodulated).
+
+``bilinear`` and ``bicubic`` upsample the low-resolution colour; ``bilinear_demodulated`` upsamples the
+demodulated irradiance and remodulates it with the high-resolution BRDF, which restores texture detail
+from the G-buffer for free. Upsampling aligns cell centres (``align_corners=False``), as the data does, and
+places a jittered LR frame's pixels where they were shaded (``lr_jitter``).
+"""
+
+from __future__ import annotations
+
+from torch import Tensor, nn
+
+from wdss.ops.sampling import upsample
+
+__all__ = ["Upsample"]
+
+
+class Upsample(nn.Module):
+    """A parameter-free baseline: ``mode`` is ``bilinear`` or ``bicubic``; ``demodulated`` upsamples irradiance."""
+
+    def __init__(self, mode: str = "bilinear", demodulated: bool = False) -> None:
+        super().__init__()
+        if mode not in ("bilinear", "bicubic"):
+            raise ValueError(f"baseline mode must be 'bilinear' or 'bicubic', got {mode!r}")
+        self.mode, self.demodulated = mode, demodulated
+        self.transform = "none"
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return ("lr", "lr_jitter") if self.demodulated else ("lr_color", "brdf", "lr_jitter")
+
+    def forward(
+        self,
+        brdf: Tensor,
+        lr: Tensor | None = None,
+        lr_color: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
+        **_: Tensor,
+    ) -> dict:
+        size = brdf.shape[-2:]
+        source = lr if self.demodulated else lr_color
+        up = upsample(source, size, self.mode, lr_jitter).clamp_min(0.0)
+        # Colour baselines return colour / F so that the shared remodulation gives their colour back exactly.
+        return {"irradiance": up if self.demodulated else up / brdf, "coefficients": None}

@@ -1,0 +1,180 @@
+"""Learned joint bilateral upsampling: the joint-bilateral kernel with a learned correction of every tap's weight.
+
+Each high-resolution pixel takes a convex combination of its ``2 radius x 2 radius`` low-resolution neighbours
+(:func:`wdss.nets.upsamplers.joint_bilateral.neighbourhood`), weighted by ``softmax(log w_jbu + c)``: ``w_jbu`` is
+the fixed joint-bilateral weight (tent times range term) and ``c`` a logit predicted per pixel and tap by a small MLP of
+1x1 convolutions from what tells the taps apart -- the scaled guide differences (albedo, depth, normal) and their
+magnitudes, the pixel's offset from the tap, the tent weight, and how far the tap's log irradiance lies from the
+joint-bilateral estimate (optionally also a few convolutional features of the G-buffer around the pixel; off by
+default: on data/mini they fit the training scenes and generalise worse). The MLP's last layer starts at zero,
+so the module starts as joint bilateral upsampling exactly and learns from there.
+
+``tap_brdf`` (``recipe.tap_brdf``): the MLP also predicts an exponent ``b`` in [0, 1] per pixel and tap, from the
+same features and the log ratio of the tap's BRDF factor to the pixel's, and the tap contributes
+``irradiance_tap * (F_tap / F)^b`` instead of its irradiance: the weights stay a convex combination, the values
+move between the demodulated estimate (0, the start) and the tap's own colour (1). On data/mini's renders a
+colour-space filter beats the demodulated one at geometry edges, where colour is not the BRDF factor times a
+smooth irradiance; the exponent lets the kernel choose per tap. The exponent is a clamp of the output, not a
+sigmoid, so that the start is exact and its gradient flows there; an output pushed below 0 everywhere would stop
+learning it (on data/mini every seed moved it up).
+
+``never_raise`` (``recipe.kernel_never_raise``, on for every run since 2026-12-07; off in checkpoints written before,
+which load as they were trained): the correction is capped at 0, so the kernel can lower a tap's weight below the
+fixed kernel's, never raise it: it never trusts a tap that joint bilateral's range test distrusts. Where the
+demodulated irradiance keeps a texture's edges (a checker of 0.26 and 0.02 blue: demodulation is exact only where
+diffuse and specular light agree, and there the blue channel's specular share differs across the edges), raising
+the weights of taps across those edges, which the training scenes reward, cost 2.3-3.2 dB against joint bilateral
+on a held-out scene; capping the correction of such a trained kernel at 0 alone gave +0.13 dB over joint bilateral
+there, and kept its gains elsewhere (docs/results.md).
+
+Why: at CPU scale the WDSS network barely leaves its starting point in a few hundred steps, while this kernel
+(625 parameters, 690 with ``tap_brdf``) learns a correction that generalises to unseen scenes within a hundred
+(docs/results.md, "Where CPU models stand"). It is the residual base ``recipe.residual=learned_bilateral`` of the
+network and a model of its own (``model=learned_bilateral``), so the two contributions are separate ablation rows.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from wdss.nets.upsamplers.joint_bilateral import check_ranges, joint_bilateral_upsample, neighbourhood, range_weight
+
+__all__ = ["LearnedBilateralUpsample"]
+
+GBUFFER_CHANNELS = 11  # wdss.data.GBUFFER_STACK
+# Scaled guide differences beyond this many range widths all mean "a different surface": clamped, so that the
+# MLP sees bounded inputs (the fixed range weight, exp(-25), already excludes such a tap).
+_DIFFERENCE_LIMIT = 5.0
+# Learned logits are bounded: a tap's weight changes by at most e^8 either way, so the kernel stays a smooth
+# reweighting of joint bilateral upsampling and never divides by a vanishing total.
+_LOGIT_LIMIT = 8.0
+
+
+class LearnedBilateralUpsample(nn.Module):
+    """Joint bilateral upsampling of ``lr`` guided by ``gbuffer`` with learned per-tap weight corrections.
+
+    ``hidden``: width of the per-tap MLP (two hidden 1x1 layers); ``context``: channels of the G-buffer context
+    features (two 3x3 convolutions at full resolution; 0, the default: none). The sigmas and radius are those of
+    the fixed kernel it starts from (:func:`~wdss.nets.upsamplers.joint_bilateral.joint_bilateral_upsample`).
+    """
+
+    def __init__(
+        self,
+        hidden: int = 16,
+        context: int = 0,
+        sigma_depth: float = 0.01,
+        sigma_normal: float = 0.1,
+        sigma_albedo: float = 0.1,
+        radius: int = 2,
+        tap_brdf: bool = False,
+        never_raise: bool = False,
+    ) -> None:
+        super().__init__()
+        self.tap_brdf, self.never_raise = bool(tap_brdf), bool(never_raise)
+        if hidden < 1 or context < 0:
+            raise ValueError(f"hidden must be >= 1 and context >= 0, got hidden={hidden}, context={context}")
+        check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
+        self.ranges = dict(sigma_depth=sigma_depth, sigma_normal=sigma_normal, sigma_albedo=sigma_albedo, radius=radius)
+        self.context = (
+            nn.Sequential(
+                nn.Conv2d(GBUFFER_CHANNELS, context, 3, padding=1), nn.ReLU(),
+                nn.Conv2d(context, context, 3, padding=1), nn.ReLU(),
+            )
+            if context
+            else None
+        )  # fmt: skip
+        # difference, |difference|, offset, tent, log deviation, context (and the log BRDF ratio with tap_brdf)
+        features = 7 + 7 + 2 + 1 + 3 + context + (3 if self.tap_brdf else 0)
+        outputs = 2 if self.tap_brdf else 1  # the logit correction (and the tap's BRDF exponent)
+        self.mlp = nn.Sequential(
+            nn.Conv2d(features, hidden, 1), nn.ReLU(), nn.Conv2d(hidden, hidden, 1), nn.ReLU(),
+            nn.Conv2d(hidden, outputs, 1),
+        )  # fmt: skip
+        nn.init.zeros_(self.mlp[-1].weight)  # start exactly at joint bilateral upsampling
+        nn.init.zeros_(self.mlp[-1].bias)
+        self.transform = "none"  # as a model of its own: an image, no subbands
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return ("lr", "gbuffer", "lr_guide", "lr_jitter") + (("brdf", "lr_brdf") if self.tap_brdf else ())
+
+    def upsample(
+        self,
+        lr: Tensor,
+        gbuffer: Tensor,
+        brdf: Tensor | None = None,
+        lr_brdf: Tensor | None = None,
+        lr_guide: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
+    ) -> Tensor:
+        """``lr`` (N, 3, h, w) non-negative irradiance to the grid of ``gbuffer`` (N, 11, H, W): (N, 3, H, W).
+
+        With ``tap_brdf``, ``brdf`` (N, 3, H, W) is the HR BRDF factor the result is remodulated with and ``lr_brdf``
+        (N, 3, h, w) the one ``lr`` was demodulated with; each tap's value is then ``irradiance * (F_tap / F)^b``,
+        ``b`` in [0, 1] learned per pixel and tap (0 at the start): 0 keeps the demodulated estimate, 1 carries the
+        tap's own colour (``irradiance * F_tap``) through unchanged, as a colour-space joint bilateral filter would
+        (where ``F_tap / F`` lies within e^5 either way: the ratio is clamped there). ``lr_guide`` (N, 7, h, w): the
+        G-buffer the LR was shaded with, ``lr_jitter`` (N, 2) where
+        (:func:`wdss.nets.upsamplers.joint_bilateral.neighbourhood`).
+        """
+        if self.tap_brdf and (brdf is None or lr_brdf is None):
+            raise ValueError("this learned bilateral kernel has tap_brdf=true: it needs the HR brdf and the lr_brdf")
+        lr, gbuffer = lr.float().clamp_min(0), gbuffer.float()
+        n, (height, width) = lr.shape[0], gbuffer.shape[-2:]
+        # Where each tap lies against the fixed estimate: outliers (fireflies, the other side of an edge) show here.
+        # A pass of its own: keeping the 16 taps for one pass would hold ~1.7 GB at 1080p instead of one tap.
+        fixed = joint_bilateral_upsample(lr, gbuffer, lr_guide=lr_guide, lr_jitter=lr_jitter, **self.ranges)
+        reference = torch.log1p(fixed)
+        context = [self.context(gbuffer[:, :GBUFFER_CHANNELS])] if self.context is not None else []
+        source = [lr, torch.log1p(lr)]  # gathered together: the values and their logs (and the taps' log F)
+        if self.tap_brdf:
+            log_brdf = torch.log(brdf.float().clamp_min(1e-4))
+            source.append(torch.log(lr_brdf.float().clamp_min(1e-4)))  # F at the LR pixels, as lr was demodulated
+        source = torch.cat(source, 1)
+        logits, values = [], []
+        for tap in neighbourhood(source, gbuffer, lr_guide=lr_guide, lr_jitter=lr_jitter, **self.ranges):
+            row, col = tap.offset
+            features = torch.cat(
+                [
+                    tap.difference.clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT),
+                    tap.difference.abs().clamp_max(_DIFFERENCE_LIMIT),
+                    row[:, None, :, None].expand(n, 1, height, width),
+                    col[:, None, None, :].expand(n, 1, height, width),
+                    tap.spatial.expand(n, 1, height, width),
+                    tap.values[:, 3:6] - reference,
+                    *context,
+                    *(
+                        [(tap.values[:, 6:9] - log_brdf).clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT)]
+                        if self.tap_brdf
+                        else []
+                    ),
+                ],
+                1,
+            )
+            out = self.mlp(features)
+            correction = out[:, :1].clamp(-_LOGIT_LIMIT, 0.0 if self.never_raise else _LOGIT_LIMIT)
+            # Taps outside the tent (weight 0) stay out: -inf would make a NaN gradient, a large negative does not.
+            base = torch.log(range_weight(tap).clamp_min(1e-30))
+            logits.append(torch.where(tap.spatial > 0, base + correction, -1e4))
+            value = tap.values[:, :3]
+            if self.tap_brdf:  # clamp, not a sigmoid: the kernel starts exactly at b = 0, and its gradient flows there
+                exponent = out[:, 1:2].clamp(0.0, 1.0)
+                value = value * torch.exp(
+                    exponent * (tap.values[:, 6:9] - log_brdf).clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT)
+                )
+            values.append(value)
+        weights = torch.softmax(torch.stack(logits), 0)
+        return (weights * torch.stack(values)).sum(0)
+
+    def forward(
+        self,
+        lr: Tensor,
+        gbuffer: Tensor,
+        brdf: Tensor | None = None,
+        lr_brdf: Tensor | None = None,
+        lr_guide: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
+        **_: Tensor,
+    ) -> dict:
+        return {"irradiance": self.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide, lr_jitter), "coefficients": None}

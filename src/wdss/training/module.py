@@ -1,0 +1,458 @@
+"""The LightningModule: a network (or baseline) -> remodulation -> loss, metrics per scale, logged images.
+
+The module is built from plain config mappings (``_target_`` dicts) for the network, optimiser and
+scheduler, and stores them as hyper-parameters, so a checkpoint alone rebuilds the model:
+``SuperResolutionModule.load_from_checkpoint(path, weights_only=True)``.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Mapping
+from typing import Any
+
+import lightning as L
+import torch
+from omegaconf import DictConfig, OmegaConf
+from torch import Tensor, nn
+
+from wdss.config.targets import check_targets, instantiate, moved, refuse_interpolation
+from wdss.data.preprocess import prediction_color, target_irradiance
+from wdss.ops.tonemap import ToneMap
+from wdss.ops.warp import warp_backward
+from wdss.training.losses import WDSSLoss
+from wdss.training.metrics import LPIPS, ImageMetrics
+from wdss.training.temporal_metrics import TemporalStability
+
+__all__ = ["SuperResolutionModule"]
+
+
+def _plain(config: Any) -> Any:
+    return OmegaConf.to_container(config, resolve=True) if isinstance(config, DictConfig) else config
+
+
+class SuperResolutionModule(L.LightningModule):
+    """Train and evaluate one super-resolution model.
+
+    ``net``: a ``_target_`` mapping of a network with an ``inputs`` property and a forward returning
+    ``{"irradiance", "coefficients"}`` (:class:`~wdss.nets.wdss.network.WDSSNet`, a baseline) or such a module.
+    ``loss_weights``: see :class:`~wdss.training.losses.WDSSLoss`. ``optimizer``/``scheduler``: ``_partial_``
+    ``_target_`` mappings. ``lpips``: ``{"backbone": path, "linear": path}`` of local weight files, or None.
+    ``temporal``: ``gt_history``, ``recurrent`` or ``none`` (default: whatever the network's branch implies).
+    ``flip``: FLIP (LDR and HDR) among the test metrics; ``flip_in_validation``: in validation too (off by default:
+    FLIP is most of a CPU validation's time, and checkpoints are chosen by ``val/psnr``).
+    """
+
+    def __init__(
+        self,
+        net: Mapping[str, Any] | nn.Module,
+        loss_weights: Mapping[str, float] | None = None,
+        optimizer: Mapping[str, Any] | None = None,
+        scheduler: Mapping[str, Any] | None = None,
+        tonemap_name: str = "hable",
+        flip: bool = True,
+        flip_in_validation: bool = False,
+        lpips: Mapping[str, str] | None = None,
+        image_every_n_epochs: int = 1,
+        trainable: bool = True,
+        temporal: str | None = None,
+        detach_history: bool = False,
+        loss_space: str = "linear",
+        tonemap_exposure: float | str | None = None,
+        warmup_steps: int = 0,
+    ) -> None:
+        super().__init__()
+        # Plain containers only: checkpoints then load with weights_only=True and rebuild the network.
+        hparams = {
+            "loss_weights": dict(_plain(loss_weights) or {"l1": 1.0}),
+            "optimizer": _plain(optimizer) or {"_target_": "torch.optim.Adam", "_partial_": True, "lr": 1e-4},
+            "scheduler": _plain(scheduler),
+            "tonemap_name": tonemap_name,
+            "flip": flip,
+            "flip_in_validation": flip_in_validation,
+            "lpips": _plain(lpips),
+            "image_every_n_epochs": image_every_n_epochs,
+            "trainable": trainable,
+            "temporal": temporal,
+            "detach_history": detach_history,
+            "loss_space": loss_space,
+            "tonemap_exposure": tonemap_exposure,
+            "warmup_steps": int(warmup_steps),
+        }
+        if not isinstance(net, nn.Module):
+            hparams["net"] = _plain(net)
+        hparams = moved(hparams)  # a checkpoint written before the layout's move names its network by the old path
+        # A checkpoint's hyper-parameters are data: a config's interpolations were resolved above (_plain, or by
+        # the instantiate that built this module), so one left is refused, as is a target off its slot's list,
+        # before anything is built.
+        refuse_interpolation(hparams)
+        for key in ("net", "optimizer", "scheduler"):
+            check_targets(hparams.get(key), key)
+        self.net = net if isinstance(net, nn.Module) else instantiate(hparams["net"], at="net")
+        if temporal is None:  # follow the network: a temporal branch trains on ground-truth history by default
+            temporal = "gt_history" if "history" in getattr(self.net, "inputs", ()) else "none"
+            hparams["temporal"] = temporal
+        self.save_hyperparameters(hparams)
+        lpips_model = LPIPS(lpips["backbone"], lpips["linear"]) if lpips else None
+        self.tone = ToneMap(tonemap_name, tonemap_exposure)  # metrics, pictures and a tone-mapped loss alike
+        self.criterion = WDSSLoss(hparams["loss_weights"], lpips=lpips_model, space=loss_space, tone=self.tone)
+        self.metrics = ImageMetrics(tonemap_name, flip=flip, lpips=lpips_model, exposure=tonemap_exposure)
+        self.optimizer_config = hparams["optimizer"]
+        self.scheduler_config = hparams["scheduler"]
+        self.trainable = trainable and any(p.requires_grad for p in self.net.parameters())
+        self._forward_args = tuple(inspect.signature(self.net.forward).parameters)
+        self.temporal = temporal
+        self._check_temporal()
+        self._state: tuple[str, int, Tensor] | None = None  # recurrent evaluation: the last output, by frame
+        self._stability: dict[str, TemporalStability] = {}  # test: temporal metrics by scale label
+        self._shown: dict[str, tuple[str, int]] = {}  # test: the first sequence of each scale, frames logged
+
+    def _check_temporal(self) -> None:
+        if self.temporal not in ("gt_history", "recurrent", "none"):
+            raise ValueError(f"model.temporal must be gt_history, recurrent or none, got {self.temporal!r}")
+        has_branch = "history" in getattr(self.net, "inputs", ())
+        if has_branch != (self.temporal != "none"):
+            raise ValueError(
+                f"model.temporal={self.temporal} but the network {'has' if has_branch else 'has no'} temporal branch"
+            )
+        if self.criterion.weights.get("temporal") and self.temporal != "recurrent":
+            raise ValueError(
+                "loss.weights.temporal > 0 compares consecutive outputs, which only temporal=recurrent produces "
+                "(with gt_history the model never sees its previous output); set it to 0 or use recurrent"
+            )
+
+    # ------------------------------------------------------------------------------------------ model
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """Batch keys to ask the data for: the network's, the BRDF, the target and (for masked L1) the mask."""
+        keys = set(self.net.inputs) | {"brdf", "target"}
+        if "lr" in keys:  # a prediction of demodulated irradiance: the emission the data separated comes back at HR
+            keys.add("emission")
+        if self.criterion.weights.get("masked_l1"):
+            keys.add("spatial_mask")
+        if self.temporal == "recurrent":  # the history is the model's own previous output, warped
+            keys = (keys - {"history"}) | {"motion"}
+        return tuple(sorted(keys))
+
+    @property
+    def test_inputs(self) -> tuple[str, ...]:
+        """Batch keys of the test split: :attr:`inputs`, and what the temporal metrics warp and mask with."""
+        return tuple(sorted(set(self.inputs) | {"motion", "gbuffer"}))
+
+    def forward(self, batch: Mapping[str, Any], *, subbands: bool = True) -> dict[str, Tensor | None]:
+        """The network's outputs and ``color``, the remodulated HR colour. ``subbands=False``: only the image is
+        needed (inference), which lets a network that can skip its coefficients take its faster path."""
+        # Pass the batch tensors the network's forward names (inputs, and scale or brdf where it takes them).
+        wanted: dict[str, Any] = {k: batch[k] for k in self._forward_args if k in batch}
+        if not subbands and "subbands" in self._forward_args:
+            wanted["subbands"] = False
+        out = dict(self.net(**wanted))
+        # Single-image baselines return a display image (tone-mapped space) instead of irradiance.
+        out["color"] = prediction_color(out.get("irradiance"), batch)
+        return out
+
+    # ------------------------------------------------------------------------------------------ steps
+
+    def _loss(
+        self, batch: Mapping[str, Any], out: Mapping[str, Tensor | None], temporal: tuple[Tensor, Tensor] | None = None
+    ) -> dict[str, Tensor]:
+        if out.get("display") is not None:  # display-space models learn the tone-mapped target
+            target = self.tone(batch["target"], batch["target"])
+            return self.criterion(out["display"], target, spatial_mask=batch.get("spatial_mask"))
+        target_coefficients = None
+        if out.get("coefficients") is not None and self.criterion.weights.get("wavelet"):
+            target_coefficients = self.net.target_coefficients(target_irradiance(batch))
+        return self.criterion(
+            out["color"],
+            batch["target"],
+            coefficients=out["coefficients"],
+            target_coefficients=target_coefficients,
+            spatial_mask=batch.get("spatial_mask"),
+            temporal=temporal,
+        )
+
+    def _with_history(self, batch: Mapping[str, Any], previous: Tensor | None) -> dict[str, Any]:
+        """The batch with ``history`` = the previous output warped by the motion vectors; at the start of a
+        sequence, the LR irradiance upsampled bilinearly (as DFASR starts), not zeros."""
+        step = dict(batch)
+        if previous is None:
+            size = batch["brdf"].shape[-2:]  # the HR size, also where there is no target (wdss.upscale)
+            step["history"] = torch.nn.functional.interpolate(
+                batch["lr"], size=size, mode="bilinear", align_corners=False
+            )
+        else:
+            step["history"] = warp_backward(
+                previous.detach() if self.hparams.detach_history else previous, batch["motion"]
+            )
+        return step
+
+    def _sequence_loss(self, steps: list[Mapping[str, Any]]) -> dict[str, Tensor]:
+        """Recurrent training over T frames: mean of per-step losses, the temporal term from step 2 on."""
+        totals: dict[str, Tensor] = {}
+        previous: dict[str, Tensor | None] | None = None
+        for index, step in enumerate(steps):
+            step = self._with_history(step, previous["irradiance"] if previous else None)
+            out = self(step)
+            temporal = None
+            if previous is not None:
+                temporal = (
+                    warp_backward(previous["color"], step["motion"]),
+                    warp_backward(steps[index - 1]["target"], step["motion"]),
+                )
+            for name, value in self._loss(step, out, temporal).items():
+                totals[name] = totals.get(name, 0.0) + value / len(steps)
+            previous = out
+        return totals
+
+    def training_step(self, batch: Mapping[str, Any], batch_idx: int) -> Tensor:
+        if "steps" in batch:
+            if self.temporal != "recurrent":
+                raise ValueError("sequence batches (data.sequence_length > 1) are for temporal=recurrent")
+            terms = self._sequence_loss(batch["steps"])
+            batch = batch["steps"][-1]
+        else:
+            if self.temporal == "recurrent":
+                batch = self._with_history(batch, None)
+            terms = self._loss(batch, self(batch))
+        if not torch.isfinite(terms["total"]):
+            raise FloatingPointError(
+                f"non-finite training loss at step {self.global_step} (batch {batch_idx}: sequences "
+                f"{batch.get('sequence')}, frames {batch.get('frame', torch.empty(0)).tolist()}, scale "
+                f"{float(batch['scale'][0]):.3g}): "
+                + ", ".join(f"{k}={float(v):.4g}" for k, v in terms.items())
+                # Loaded data is finite (checked per file), so the usual cause is HDR colour too bright for the loss.
+                + f"; the brightest target value is {float(batch['target'].max()):.4g}: HDR colour can overflow the "
+                "loss, clip it at load with data.preprocessing.color_max (e.g. 10)"
+            )
+        n = batch["target"].shape[0]
+        self.log("train/loss", terms["total"], prog_bar=True, batch_size=n)
+        for name, value in terms.items():
+            if name != "total":
+                self.log(f"train/{name}", value, batch_size=n)
+        return terms["total"]
+
+    def _evaluate(self, batch: Mapping[str, Any], stage: str, suffix: str) -> dict[str, Tensor]:
+        if self.temporal == "recurrent":  # frames arrive in order: feed back the previous output of the sequence
+            state, key = self._state, (batch["sequence"][0], int(batch["frame"][0]))
+            follows = state is not None and state[0] == key[0] and state[1] == key[1] - 1 and len(batch["frame"]) == 1
+            batch = self._with_history(batch, state[2] if follows else None)
+        out = self(batch)
+        if self.temporal == "recurrent":
+            self._state = (batch["sequence"][0], int(batch["frame"][0]), out["irradiance"].detach())
+        # FLIP is most of a CPU validation's cost, and checkpoints are chosen by val/psnr: test always has it.
+        flip = stage == "test" or bool(self.hparams.get("flip_in_validation", False))
+        if out.get("display") is not None:
+            values = self.metrics.display(out["display"].float(), batch["target"].float(), flip=flip)
+        else:
+            values = self.metrics(out["color"].float(), batch["target"].float(), flip=flip)
+        n = batch["target"].shape[0]
+        # sync_dist: under DDP each rank evaluates its share of the frames; Lightning reduces a mean as the sum of
+        # the ranks' batch-size-weighted sums over their summed batch sizes, so the value is that of one process.
+        # Every rank must log the same names (each name is one collective), hence psnr_infinite even when 0.
+        for name, per_image in values.items():
+            finite = per_image[torch.isfinite(per_image)]
+            # Identical images have infinite PSNR: average the finite ones, and say so with a count.
+            if name == "psnr":
+                self.log(
+                    f"{stage}/psnr_infinite{suffix}",
+                    float(per_image.numel() - finite.numel()),
+                    reduce_fx="sum",
+                    batch_size=n,
+                    add_dataloader_idx=False,
+                    sync_dist=True,
+                )
+            value = finite.mean() if finite.numel() else per_image.mean()
+            self.log(
+                f"{stage}/{name}{suffix}",
+                value,
+                batch_size=n,
+                add_dataloader_idx=False,
+                prog_bar=name == "psnr",
+                sync_dist=True,
+            )
+        if stage == "val":
+            self.log("val/loss", self._loss(batch, out)["total"], batch_size=n, sync_dist=True)
+        return out
+
+    def validation_step(self, batch: Mapping[str, Any], batch_idx: int) -> None:
+        out = self._evaluate(batch, "val", "")
+        if (
+            batch_idx == 0
+            and self.hparams.image_every_n_epochs
+            and (self.current_epoch % self.hparams.image_every_n_epochs == 0)
+        ):
+            self._log_images(batch, out)
+
+    def on_test_epoch_start(self) -> None:
+        self._stability, self._shown = {}, {}
+
+    def test_step(self, batch: Mapping[str, Any], batch_idx: int, dataloader_idx: int = 0) -> dict[str, Tensor]:
+        """Per-frame metrics; the temporal ones accumulate over each sequence, whose frames arrive in order."""
+        label = f"{float(batch['scale'][0]):g}x"
+        out = self._evaluate(batch, "test", f"_{label}")  # MLflow forbids '@' in metric names
+        target = batch["target"].float()
+        display = out.get("display")
+        shown = (display if display is not None else self.tone(out["color"].float(), target)).detach().float()
+        shown_target = self.tone(target, target)
+        stability = self._stability.setdefault(label, TemporalStability())
+        for index, sequence in enumerate(batch["sequence"]):
+            frame = int(batch["frame"][index])
+            if "motion" in batch and "gbuffer" in batch:
+                one = slice(index, index + 1)
+                stability.update(
+                    sequence, frame, shown[one], shown_target[one], batch["motion"][one], batch["gbuffer"][one]
+                )
+            # The first three frames of every scale's first sequence, for the report's qualitative figure.
+            first, logged = self._shown.setdefault(label, (sequence, 0))
+            if sequence == first and logged < 3:
+                suffix = f"_t{logged}" if logged else ""
+                self._log_frame(shown[index : index + 1], f"test/pred_{label}{suffix}.png")
+                self._log_frame(shown_target[index : index + 1], f"test/target_{label}{suffix}.png")
+                self._shown[label] = (first, logged + 1)
+        result = {"shown": shown}  # the tone-mapped prediction, for videos
+        if out.get("color") is not None:
+            result["color"] = out["color"].detach()
+        return result
+
+    def on_test_epoch_end(self) -> None:
+        """Log the temporal metrics of every scale (means over sequences) and, per sequence, each frame's PSNR and
+        warping error as MLflow metric histories ``frames/<sequence>/psnr_<s>x`` with the frame index as step."""
+        for label, stability in self._pooled_stability().items():
+            for name, value in stability.compute().items():
+                self.log(f"test/{name}_{label}", value, add_dataloader_idx=False, sync_dist=True)
+            self._log_frame_metrics(label, stability)
+
+    def _pooled_stability(self) -> dict[str, TemporalStability]:
+        """Every rank's temporal sums pooled (under DDP each rank saw a block of the frames), the same on all ranks."""
+        if self.trainer.world_size == 1:
+            return self._stability
+        import torch.distributed as dist
+
+        shares: list[dict[str, dict]] = [{} for _ in range(self.trainer.world_size)]
+        dist.all_gather_object(shares, {label: s.sequences for label, s in self._stability.items()})
+        pooled: dict[str, TemporalStability] = {}
+        for share in shares:  # in rank order: every rank pools, and then logs, the same names in the same order
+            for label, sequences in share.items():
+                pooled.setdefault(label, TemporalStability()).add(sequences)
+        return pooled
+
+    def _log_frame_metrics(self, label: str, stability: TemporalStability) -> None:
+        experiment, run_id = getattr(self.logger, "experiment", None), getattr(self.logger, "run_id", None)
+        if experiment is None or run_id is None or not hasattr(experiment, "log_batch"):
+            return
+        import math
+        import re
+        import time
+
+        from mlflow.entities import Metric
+
+        now = int(time.time() * 1000)
+        metrics = []
+        for sequence in stability.sequences:
+            key = re.sub(r"[^\w\-. ]", "_", sequence)  # the characters MLflow allows in metric names
+            for frame, psnr, twe, twe_target in stability.frames(sequence):
+                values = {"psnr": psnr, "twe": twe, "twe_target": twe_target}
+                metrics += [
+                    Metric(f"frames/{key}/{name}_{label}", value, now, frame)
+                    for name, value in values.items()
+                    if math.isfinite(value)
+                ]
+        for start in range(0, len(metrics), 1000):  # MLflow's limit per batch
+            experiment.log_batch(run_id, metrics=metrics[start : start + 1000])
+
+    def _log_frame(self, image: Tensor, artifact_file: str) -> None:
+        experiment, run_id = getattr(self.logger, "experiment", None), getattr(self.logger, "run_id", None)
+        if experiment is not None and run_id is not None and hasattr(experiment, "log_image"):
+            array = (image[0].permute(1, 2, 0).cpu().numpy() * 255).round().astype("uint8")
+            experiment.log_image(run_id, array, artifact_file=artifact_file)
+
+    # ------------------------------------------------------------------------------------------ images
+
+    def _log_images(self, batch: Mapping[str, Any], out: Mapping[str, Tensor | None]) -> None:
+        experiment = getattr(self.logger, "experiment", None)
+        run_id = getattr(self.logger, "run_id", None)
+        if experiment is None or run_id is None or not hasattr(experiment, "log_image"):
+            return
+        from wdss.video import labelled  # the eval videos' captions: one reading of every panel wdss writes
+
+        panel = labelled(comparison_panel(batch, out, self.tone))
+        experiment.log_image(run_id, panel, artifact_file=f"images/val_epoch{self.current_epoch:03d}.png")
+        coefficients = out.get("coefficients")
+        if coefficients is not None:
+            experiment.log_image(
+                run_id,
+                labelled(subband_panel(coefficients[0]), SUBBAND_LABELS),
+                artifact_file=f"images/subbands_epoch{self.current_epoch:03d}.png",
+            )
+
+    # ------------------------------------------------------------------------------------------ optimisation
+
+    def configure_optimizers(self) -> Any:
+        if not self.trainable:
+            return None
+        optimizer = instantiate(self.optimizer_config, at="optimizer")(self.net.parameters())
+        if not self.scheduler_config:
+            return optimizer
+        scheduler = instantiate(self.scheduler_config, at="scheduler")(optimizer)
+        return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
+
+    def optimizer_step(self, epoch: int, batch_idx: int, optimizer: Any, optimizer_closure: Any = None) -> None:
+        # Linear learning-rate warm-up over the first warmup_steps optimiser steps (Lightning's recipe: scale the
+        # groups' lr before stepping); the epoch scheduler takes over after it, from the same initial lr.
+        warmup = self.hparams.warmup_steps
+        if warmup and self.trainer.global_step <= warmup:
+            scale = min(1.0, (self.trainer.global_step + 1) / warmup)
+            for group in optimizer.param_groups:
+                group.setdefault("initial_lr", group["lr"])
+                group["lr"] = group["initial_lr"] * scale
+        super().optimizer_step(epoch, batch_idx, optimizer, optimizer_closure)
+
+
+def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None], tone: ToneMap):
+    """LR (nearest-upsampled) | prediction | target | error x4, tone-mapped, as an (H, 4W, 3) uint8 array."""
+    import numpy as np
+
+    reference = batch["target"][:1].float()
+    target = tone(reference, reference)
+    shown = out.get("display")
+    pred = shown[:1].detach().float() if shown is not None else tone(out["color"][:1].detach().float(), reference)
+    lr_source = batch.get("lr_color")
+    if lr_source is None and "lr" in batch:
+        lr_brdf = torch.nn.functional.interpolate(batch["brdf"][:1], size=batch["lr"].shape[-2:], mode="nearest")
+        lr_source = batch["lr"][:1] * lr_brdf
+        if "emission" in batch:
+            lr_source = lr_source + torch.nn.functional.interpolate(
+                batch["emission"][:1], size=lr_source.shape[-2:], mode="nearest"
+            )
+    lr = (
+        torch.zeros_like(target)
+        if lr_source is None
+        else tone(
+            torch.nn.functional.interpolate(lr_source[:1].float(), size=target.shape[-2:], mode="nearest"), reference
+        )
+    )
+    error = ((pred - target).abs() * 4).clamp(0, 1)
+    row = torch.cat([lr, pred, target, error], dim=-1)[0]
+    return (row.permute(1, 2, 0).cpu().numpy() * 255).round().astype(np.uint8)
+
+
+SUBBAND_LABELS = ("LL (own range)", "LH", "HL", "HH (0.5 = zero)")
+
+
+def subband_panel(coefficients: Tensor):
+    """The four subbands of the first image, side by side, each scaled to its own range (uint8): LL from 0 to its
+    largest magnitude, the detail bands around grey 0.5 for zero (:data:`SUBBAND_LABELS`)."""
+    import numpy as np
+
+    bands = coefficients.detach().float().view(4, -1, *coefficients.shape[-2:])[:, :3]
+    tiles = []
+    for index, band in enumerate(bands):
+        band = band.mean(0)
+        if index == 0:
+            band = band / band.abs().max().clamp_min(1e-8)
+        else:
+            band = 0.5 + band / (2 * band.abs().max().clamp_min(1e-8))
+        tiles.append(band.clamp(0, 1))
+    image = torch.cat(tiles, dim=-1)
+    return (image.cpu().numpy() * 255).round().astype(np.uint8)
