@@ -275,7 +275,7 @@ def test_validation_images_are_captioned_with_what_each_tile_shows(monkeypatch):
     target | error x4, and the subbands' names with how each is scaled; the pixels below stay the panel's."""
     from types import SimpleNamespace
 
-    from wdss.model.module import comparison_panel, subband_panel
+    from wdss.training.module import comparison_panel, subband_panel
 
     logged = {}
 
