@@ -64,11 +64,13 @@ def test_the_gradient_reaches_every_parameter_after_one_step(context):
         optimizer.step()
 
 
-@pytest.mark.parametrize("never_raise", [False, True])
-def test_it_learns_an_edge_the_fixed_kernel_blurs(never_raise):
+@pytest.mark.parametrize("raise_within_albedo", [False, True])
+def test_it_learns_an_edge_the_fixed_kernel_blurs(raise_within_albedo):
     """Two surfaces whose albedos differ by less than the fixed albedo range (sigma 0.1) but whose irradiance
     differs by 4x: joint bilateral upsampling mixes them at the edge, a learned kernel separates them (lowering
-    the weights of the other side's taps: never_raise learns it too)."""
+    the weights of the other side's taps, or raising its own side's: raise_within_albedo learns it too). Not
+    never_raise: its correction starts at the cap, and once every output of the zero-initialised last layer has
+    moved above it no gradient reaches the kernel (whether that happens here depends on the thread count)."""
     torch.manual_seed(0)
     n, height, width, scale = 4, 32, 32, 2.0
     g = torch.Generator().manual_seed(0)
@@ -81,7 +83,7 @@ def test_it_learns_an_edge_the_fixed_kernel_blurs(never_raise):
         gbuffer[i, :3, :, edge:] = 0.05
         irradiance[i, :, :, :edge], irradiance[i, :, :, edge:] = 0.5, 2.0
     lr = point_sample(irradiance, lr_size(height, width, scale))
-    model = LearnedBilateralUpsample(never_raise=never_raise)
+    model = LearnedBilateralUpsample(raise_within_albedo=raise_within_albedo)
 
     def error() -> float:
         with torch.no_grad():
@@ -206,13 +208,49 @@ def test_never_raise_ignores_every_correction_that_would_raise_a_tap_above_joint
 
 
 def test_checkpoints_of_kernels_that_raised_taps_load_as_they_were_trained():
-    """never_raise is off unless a config turns it on (every config does since it exists): a checkpoint whose
-    stored network config predates it builds the kernel it was trained as."""
+    """never_raise and raise_within_albedo are off unless a config turns one on (every config does since they exist):
+    a checkpoint whose stored network config predates them builds the kernel it was trained as; today's configs
+    raise only within one albedo."""
     from tests.test_train import compose_train
 
-    assert not LearnedBilateralUpsample().never_raise
+    plain = LearnedBilateralUpsample()
+    assert not plain.never_raise and not plain.raise_within_albedo
     from wdss.config.targets import instantiate
 
     for variant in ("swt_db4", "learned_bilateral"):
         net = instantiate(compose_train([f"variant={variant}", "experiment=cpu"]).model.net)
-        assert (getattr(net, "upsampler", None) or net).never_raise
+        kernel = getattr(net, "upsampler", None) or net
+        assert kernel.raise_within_albedo and not kernel.never_raise
+
+
+def test_never_raise_and_raise_within_albedo_exclude_each_other():
+    with pytest.raises(ValueError, match="never_raise and raise_within_albedo"):
+        LearnedBilateralUpsample(never_raise=True, raise_within_albedo=True)
+
+
+def test_a_raise_never_carries_a_tap_across_an_albedo_edge():
+    """Two surfaces of very different albedo whose demodulated irradiance differs (as it does where demodulation
+    is inexact). Raising every tap by the same logit changes nothing without the gate (a softmax is blind to a
+    common shift); with raise_within_albedo only the taps of the pixel's own albedo are raised, so the pixels by
+    the edge take less of the other side than joint bilateral does, never more, and pixels away from it are
+    unchanged."""
+    height, width, scale, edge = 24, 24, 2.0, 12
+    gbuffer = torch.zeros(1, 11, height, width)
+    gbuffer[:, 3], gbuffer[:, 6] = 0.5, 1.0  # one depth, one normal
+    gbuffer[:, :3, :, :edge], gbuffer[:, :3, :, edge:] = 0.5, 0.42  # within the albedo range: JBU mixes the sides
+    irradiance = torch.zeros(1, 3, height, width)
+    irradiance[..., :edge], irradiance[..., edge:] = 1.0, 3.0
+    lr = point_sample(irradiance, lr_size(height, width, scale))
+    fixed = joint_bilateral_upsample(lr, gbuffer)
+    outputs = {}
+    for gated in (False, True):
+        model = LearnedBilateralUpsample(raise_within_albedo=gated)
+        with torch.no_grad():  # the same positive correction for every tap
+            model.mlp[-1].bias.fill_(4.0)
+        outputs[gated] = model(lr, gbuffer)["irradiance"]
+    torch.testing.assert_close(outputs[False], fixed, atol=1e-5, rtol=1e-5)
+    mixing = lambda out: (out - irradiance).abs()  # noqa: E731  (how much of the other side a pixel took)
+    assert float(mixing(fixed).max()) > 0.05  # joint bilateral mixes the two sides at the edge
+    assert bool((mixing(outputs[True]) <= mixing(fixed) + 1e-5).all())
+    assert float(mixing(outputs[True]).max()) < 0.2 * float(mixing(fixed).max())
+    torch.testing.assert_close(outputs[True][..., :4], fixed[..., :4])  # away from the edge: as joint bilateral

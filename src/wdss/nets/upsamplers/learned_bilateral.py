@@ -18,14 +18,17 @@ smooth irradiance; the exponent lets the kernel choose per tap. The exponent is 
 sigmoid, so that the start is exact and its gradient flows there; an output pushed below 0 everywhere would stop
 learning it (on data/mini every seed moved it up).
 
-``never_raise`` (``recipe.kernel_never_raise``, on for every run since 2026-12-07; off in checkpoints written before,
-which load as they were trained): the correction is capped at 0, so the kernel can lower a tap's weight below the
-fixed kernel's, never raise it: it never trusts a tap that joint bilateral's range test distrusts. Where the
-demodulated irradiance keeps a texture's edges (a checker of 0.26 and 0.02 blue: demodulation is exact only where
-diffuse and specular light agree, and there the blue channel's specular share differs across the edges), raising
-the weights of taps across those edges, which the training scenes reward, cost 2.3-3.2 dB against joint bilateral
-on a held-out scene; capping the correction of such a trained kernel at 0 alone gave +0.13 dB over joint bilateral
-there, and kept its gains elsewhere (docs/results.md).
+``never_raise`` (``recipe.kernel_never_raise``): the correction is capped at 0, so the kernel can lower a tap's
+weight below the fixed kernel's, never raise it. ``raise_within_albedo`` (``recipe.kernel_raise_within_albedo``, on
+for every run since 2026-12-07; both off in checkpoints written before, which load as they were trained): a raise
+counts only as far as the tap's albedo matches the pixel's (it is multiplied by the fixed kernel's albedo range
+term, ``exp(-|albedo difference / range|^2)``); lowering is free. Why: demodulation is exact only where diffuse and
+specular light agree; on a checker of 0.26 and 0.02 blue the blue channel's specular share differs across the edges,
+so the demodulated irradiance keeps them, and a kernel that learned to raise the weights of taps across albedo edges
+(which the training scenes reward) mixed them: 2.3-3.2 dB below joint bilateral on that held-out scene. Capping every
+raise fixed that scene but cost the seeds whose kernel learned to trust taps of its own surface; raising only within
+one albedo keeps both (docs/results.md). The cap also starves the kernel: its correction starts at the cap, and
+where the last layer's outputs all move above it no gradient reaches the MLP. The two options exclude each other.
 
 Why: at CPU scale the WDSS network barely leaves its starting point in a few hundred steps, while this kernel
 (625 parameters, 690 with ``tap_brdf``) learns a correction that generalises to unseen scenes within a hundred
@@ -69,9 +72,14 @@ class LearnedBilateralUpsample(nn.Module):
         radius: int = 2,
         tap_brdf: bool = False,
         never_raise: bool = False,
+        raise_within_albedo: bool = False,
     ) -> None:
+        # never_raise and raise_within_albedo default off: a checkpoint whose config predates them builds as trained
         super().__init__()
         self.tap_brdf, self.never_raise = bool(tap_brdf), bool(never_raise)
+        self.raise_within_albedo = bool(raise_within_albedo)
+        if self.never_raise and self.raise_within_albedo:
+            raise ValueError("never_raise and raise_within_albedo exclude each other: choose one")
         if hidden < 1 or context < 0:
             raise ValueError(f"hidden must be >= 1 and context >= 0, got hidden={hidden}, context={context}")
         check_ranges(sigma_depth, sigma_normal, sigma_albedo, radius)
@@ -154,6 +162,9 @@ class LearnedBilateralUpsample(nn.Module):
             )
             out = self.mlp(features)
             correction = out[:, :1].clamp(-_LOGIT_LIMIT, 0.0 if self.never_raise else _LOGIT_LIMIT)
+            if self.raise_within_albedo:  # a raise counts only as far as the tap's albedo matches the pixel's
+                gate = torch.exp(-(tap.difference[:, :3] ** 2).sum(1, keepdim=True))
+                correction = correction.clamp_max(0.0) + gate * correction.clamp_min(0.0)
             # Taps outside the tent (weight 0) stay out: -inf would make a NaN gradient, a large negative does not.
             base = torch.log(range_weight(tap).clamp_min(1e-30))
             logits.append(torch.where(tap.spatial > 0, base + correction, -1e4))

@@ -330,6 +330,7 @@ class WDSSNet(nn.Module):
         refine_width: int = 0,
         refine_depth: int = 3,
         kernel_never_raise: bool = False,
+        kernel_raise_within_albedo: bool = False,
     ) -> None:
         super().__init__()
         if output_space not in OUTPUT_SPACES:
@@ -337,10 +338,12 @@ class WDSSNet(nn.Module):
         if residual not in RESIDUALS:
             raise ValueError(f"model.residual must be one of {', '.join(RESIDUALS)}, got {residual!r}")
         self.output_space, self.residual = output_space, residual
-        # tap_brdf and kernel_never_raise are the learned kernel's options (a per-tap BRDF exponent; corrections that
-        # only lower tap weights): without that kernel they change nothing.
+        # tap_brdf, kernel_never_raise and kernel_raise_within_albedo are the learned kernel's options (a per-tap BRDF
+        # exponent; corrections that only lower tap weights; raises only within one albedo): without it they do nothing.
         self.upsampler = (
-            LearnedBilateralUpsample(tap_brdf=tap_brdf, never_raise=kernel_never_raise)
+            LearnedBilateralUpsample(
+                tap_brdf=tap_brdf, never_raise=kernel_never_raise, raise_within_albedo=kernel_raise_within_albedo
+            )
             if residual == "learned_bilateral"
             else None
         )
