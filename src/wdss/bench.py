@@ -434,8 +434,8 @@ def _inference_runners(
     if dtype == torch.bfloat16:  # a copy in bfloat16, as the fp16 export makes one in float16; the scale stays exact
         graph = copy.deepcopy(graph).to(dtype)
         inputs = {k: v if k == "scale" else v.to(dtype) for k, v in inputs.items()}
-    # torch runs the graph channels-last, the layout engines feed: oneDNN's convolutions then skip their reorders
-    # (eager none at 1080p 2x: 5162 vs 6864 ms), and the SWT head computes its tail on cells (wdss.nets.wdss.polyphase).
+    # torch runs the graph channels-last, the layout engines feed: oneDNN's convolutions then skip their reorders,
+    # and the SWT head computes its tail on cells (wdss.nets.wdss.polyphase).
     graph = graph.to(device, memory_format=torch.channels_last)
     inputs = {k: v.to(device, memory_format=torch.channels_last) if v.dim() == 4 else v for k, v in inputs.items()}
     runners: dict[str, Callable[[], object]] = {}

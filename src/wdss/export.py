@@ -266,11 +266,11 @@ def fold_constants(model: Any, longest_axis: int) -> None:
     In a fixed-size graph every tensor computed from the frame's size alone is a constant: the joint-bilateral
     kernels' tent weights, offsets and masks (16 taps, twice for the learned kernel). onnxscript folds constants of
     up to 512 x 512 elements by default, so a frame below that (384x216: 82944 pixels) stored each of them per
-    pixel (39 MB for 0.18 M parameters, in float64 while the taps' positions were) whereas 1080p's, above the
-    limit, stayed computed (3.4 MB). Folding only up to the longer side keeps the per-axis grids (``(1, W)`` and
-    ``(1, H)``) as constants and builds every per-pixel one in the graph from them, at any size (onnxruntime
-    folds them again in memory when it loads the graph). A product of weights larger than the longer side also
-    stays an operator, computed from its (smaller) factors."""
+    pixel (in float64 while the taps' positions were), a graph many times its weights' size (docs/performance.md),
+    whereas 1080p's, above the limit, stayed computed. Folding only up to the longer side keeps the per-axis grids
+    (``(1, W)`` and ``(1, H)``) as constants and builds every per-pixel one in the graph from them, at any size
+    (onnxruntime folds them again in memory when it loads the graph). A product of weights larger than the longer
+    side also stays an operator, computed from its (smaller) factors."""
     import onnxscript.optimizer
     import onnxscript.rewriter.onnx_fusions
 

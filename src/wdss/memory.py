@@ -2,16 +2,15 @@
 
 glibc's malloc serves every block above its mmap threshold (at most 32 MiB) with a fresh ``mmap`` and unmaps it
 when freed. A 1080p feature map (64 channels at 960x540: 133 MB) is such a block, so every frame maps its tensors
-anew and the kernel faults in and zeroes each 4 KiB page on first touch. Measured on this project's CPU machine
-(2 threads): an eager forward of the paper's network at 1080p 2x faulted 1.25-1.58 M pages (5-6 GB) and took
-2.8-3.8 s; with the memory kept it faulted none after the first frame and took 1.4-1.6 s, resident memory steady
-at 2.8 GB over 12 forwards. Engines, onnxruntime's arena and PyTorch's CUDA allocator all keep the memory they free.
+anew and the kernel faults in and zeroes each 4 KiB page on first touch: on a CPU that was a large share of an
+eager forward's time at 1080p, and with the memory kept no page faults after the first frame, resident memory
+steady (docs/performance.md). Engines, onnxruntime's arena and PyTorch's CUDA allocator all keep the memory they free.
 
 glibc is told so by its tunables, which it reads only when a process starts (:data:`TUNABLES`, glibc 2.26 on): no
 block from ``mmap``, the heap never trimmed, and no per-thread cache or fast bins. The last two matter: the few
 bytes ``posix_memalign`` (PyTorch's CPU allocator) splits off a block sit in those caches as if in use, so the
-freed block cannot merge with its neighbours and the next one of the same size grows the heap instead (measured:
-64 MB more each time, without end). ``mallopt`` can set all but the per-thread cache at run time; hence an entry
+freed block cannot merge with its neighbours and the next one of the same size grows the heap instead, on every
+frame, without end. ``mallopt`` can set all but the per-thread cache at run time; hence an entry
 point starts itself again under the tunables (:func:`restart_with_retained_memory`), whose values replace a user's
 own for the same four and are inherited by the processes it starts (torch.compile's workers among them).
 PyTorch's CPU tuning guide recommends preloading jemalloc or tcmalloc for the same reason; this needs neither, and

@@ -62,8 +62,8 @@ __all__ = ["UpscaleError", "main", "output_name", "upscale"]
 RECORD = "upscale.json"
 # The network's precision, by autocast: its convolutions and matrix products in bfloat16 or float16, what needs
 # float32 (the wavelet synthesis, the learned kernel's softmax) in float32, as are the metrics and files. In bfloat16
-# the network runs ~1.7x faster on CPUs with AVX512-BF16 or AMX, ~1e-2 of the frame's maximum off float32; float16
-# suits GPUs.
+# the network runs faster on CPUs with AVX512-BF16 or AMX, a little off float32 (docs/performance.md); float16 suits
+# GPUs.
 PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16, "float16": torch.float16}
 SHOWN = ("psnr", "ssim", "flip")  # printed per frame (every metric is recorded)
 _READ_ERRORS = (SceneError, ExrError, OSError)

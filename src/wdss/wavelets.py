@@ -122,7 +122,7 @@ def _analysis_pads(taps: int, dilation: int) -> tuple[int, int]:
 def _circular_pad(x: Tensor, top: int, bottom: int, left: int, right: int) -> Tensor:
     """Periodic extension of the last two dimensions, returned channels-last.
 
-    The filter-bank convolutions below run 2-3x faster on channels-last tensors on CPU (oneDNN), so the one
+    The filter-bank convolutions below run much faster on channels-last tensors on CPU (oneDNN), so the one
     copy a pad costs also does the layout change. Pads larger than the image wrap around more than once.
     """
     n, c, height, width = x.shape
@@ -242,7 +242,7 @@ def _swt_synthesis_level(coeffs: Tensor, rows: Tensor, *, dilation: int) -> Tens
         and min(coeffs.shape[-2:]) >= left + right
         and not torch.compiler.is_exporting()
     ):
-        # Already in the convolutions' fast layout (the network's subbands are): no padded copy (-24 ms at 1080p).
+        # Already in the convolutions' fast layout (the network's subbands are): no padded copy.
         rows_done = _circular_correlation(coeffs, along_h, -2, right, dilation, groups=2)
         return _circular_correlation(rows_done, along_w, -1, right, dilation, groups=1)
     padded = _circular_pad(coeffs, right, left, right, left)
@@ -462,9 +462,8 @@ class WaveletTransform(nn.Module):
 
     def forward(self, coeffs: Tensor) -> Tensor:
         if self.transform == "swt" and coeffs.device.type == "cpu" and _compiling_for_run():
-            # torch.compile's code for this filter bank on CPU is slower than eager's channels-last convolutions:
-            # at 1080p 2x (paper widths) running it eagerly took the compiled SWT-db4 / none ratio from 1.13-1.14
-            # to 1.10-1.11. An exported graph (ONNX) still holds the whole synthesis.
+            # torch.compile's code for this filter bank on CPU is slower than eager's channels-last convolutions,
+            # so a compiled network runs it eagerly. An exported graph (ONNX) still holds the whole synthesis.
             return _eager_synthesis(self, coeffs)
         return self.synthesis(coeffs)
 

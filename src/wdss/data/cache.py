@@ -1,6 +1,6 @@
 """A byte-bounded LRU of decoded frames, one per process.
 
-Decoding a frame's EXR files costs ~90 % of a training batch's loading time on a CPU (a 64^2 patch is cut from
+Decoding a frame's EXR files costs most of a training batch's loading time on a CPU (a 64^2 patch is cut from
 a whole decoded 384x216 frame), and a small dataset is read many times per epoch (several patches per frame, the
 previous frame for history). Each loader worker keeps the frames it decoded; the whole of ``data/mini`` fits in
 a few hundred MB. Entries are read-only arrays: readers copy what they hand on, so nothing downstream can write

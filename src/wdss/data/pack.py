@@ -11,8 +11,8 @@ Options (``key=value``):
                they read; ``brdf=split_sum`` adds roughness and NoV
 ``sequences``  a comma list of sequence names (default: all under ``root``)
 ``layout``     auto | unreal | dfasr
-``codec``      lz4 (default: ~1.2x the size of zip EXR files, decoded ~2.7x as fast as zstd) | zstd (about the EXR
-               files' size) | none (~1.7x the size of zip EXR files, but a patch is one copy out of the memory map:
+``codec``      lz4 (default: a little larger than zip EXR files, decoded much faster than zstd) | zstd (about the
+               EXR files' size) | none (larger still, but a patch is one copy out of the memory map:
                the fastest to read; unchecked: a byte changed in the store later is read as it is); lz4 and
                zstd checksum every chunk
 ``level``      compression level (default: lz4 9, its high-compression levels are 3-12; zstd 3)
@@ -73,8 +73,8 @@ OPTIONS = (
     "verify",
     "depth_far",
 )
-# 128^2 tiles: fewer, larger chunks decode faster per patch than 64^2 (zstd: ~15%) and pack ~1% smaller; a 432^2
-# patch reads ~1.7x its pixels (64^2: ~1.4x), cheaper than the per-chunk cost it saves.
+# 128^2 tiles: fewer, larger chunks decode faster per patch than 64^2 and pack a little smaller; a 432^2 patch
+# reads ~1.7x its pixels (64^2: ~1.4x), cheaper than the per-chunk cost it saves.
 TILE = 128
 SAVE_EVERY_S = 5.0  # the index is rewritten at most this often while packing (and after every resolution)
 

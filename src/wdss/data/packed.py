@@ -8,8 +8,8 @@ A packed store holds one folder per sequence, ``<store>/<sequence>/``:
   edges; ``tile: 0``, the default without compression: the whole frame) in the buffer's dtype: float16 where every
   channel of the source was half, float32 otherwise. With ``codec: zstd`` a chunk is compressed with a content
   checksum (a corrupt chunk fails to decode); with ``codec: lz4`` (the default) a chunk is the CRC-32 of the rest
-  (4 bytes, little-endian), then an LZ4 block (high compression: ~1.2x the size of zip EXR files, decoded ~2.7x as
-  fast as zstd); with ``codec: none`` it is stored as is, and a window of an untiled frame is one strided copy out
+  (4 bytes, little-endian), then an LZ4 block (high compression: a little larger than zip EXR files, decoded much
+  faster than zstd); with ``codec: none`` it is stored as is, and a window of an untiled frame is one strided copy out
   of the memory map. Such a store is unchecked: a byte that changes in it later is read as it is (only each
   file's length is compared with the index, at opening); its errors and the packer say so.
 * ``index.json``: format and version, the sequence's name, layout and source, codec and tile size, the sidecar's

@@ -10,17 +10,17 @@ Two factors, chosen by config:
 
 Where F is zero or tiny (sky, emitters, black albedo) a division would blow up or lose the pixel; there the
 factor tends to 1 (:func:`safe_brdf`), so the pixel passes through un-demodulated and remodulates to exactly
-itself. How it gets there matters: a hard switch at ``F = 1e-4`` (``knee=0``, wdss before 2026-12) divides a
+itself. How it gets there matters: a hard switch at ``F = 1e-4`` (``knee=0``, wdss's earlier factor) divides a
 pixel with ``F = 0.001`` by 0.001 beside a sky pixel divided by 1. Filtered G-buffers whose filter has long tails
 (or noisy ones) are full of such pixels near every silhouette against the sky, and their irradiance is 1000x
-their neighbours', which every upsampler spreads: data/mini's test scenes with colour and G-buffers filtered
-alike by a Gaussian of 0.5 px lose 6.7 dB with bilinear and 9.2 dB with joint bilateral at 2x. ``knee > 0``
+their neighbours', which every upsampler spreads: on such G-buffers bilinear and joint bilateral upsampling fall
+far below their scores on clean ones (docs/results.md, "Data conventions and what they change"). ``knee > 0``
 blends continuously, ``F + (1 - F) exp(-(F / knee)^2)``: 1 at ``F = 0``, F itself (to 1e-4) above ``4 knee``,
 never below ~0.05 for the default ``knee = 0.02``. Demodulation and remodulation use the same factor, so any
 positive factor is exact; the knee only decides how smooth the demodulated signal is. The default was chosen
-on four scenes rendered for the choice (seeds 500-503, no test scene): it changes nothing measurable on clean
-or Blender-anti-aliased renders (<= 0.01 dB) and recovers most of the loss above; larger knees gain more there
-but leave dark albedo partly modulated (0.1 cost bilinear 2 dB on data/mini's test scenes).
+on scenes rendered for the choice, no test scene: it changes nothing measurable on clean or Blender-anti-aliased
+renders and recovers most of the loss above; larger knees gain more there but leave dark albedo partly modulated
+(docs/decisions.md).
 Every function works on ``(N, C, H, W)`` tensors.
 """
 

@@ -43,7 +43,7 @@ def warp_backward(previous: Tensor, motion: Tensor, *, origin: tuple[int, int] =
 def normalize_normals(normal: Tensor, eps: float = 1e-6) -> Tensor:
     """Unit normals; zero-length or non-finite ones become 0 (and so never count as similar)."""
     normal = torch.nan_to_num(normal, nan=0.0, posinf=0.0, neginf=0.0)
-    length = (normal * normal).sum(1, keepdim=True).sqrt()  # ~20x faster than Tensor.norm over dim 1 on CPU
+    length = (normal * normal).sum(1, keepdim=True).sqrt()  # much faster than Tensor.norm over dim 1 on CPU
     return torch.where(length > eps, normal / length.clamp_min(eps), torch.zeros_like(normal))
 
 

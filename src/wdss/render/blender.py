@@ -198,7 +198,7 @@ def configure_cycles(scene, layer, *, seed: int, threads: int = 0) -> None:
     cycles.use_animated_seed = True
     scene.render.use_motion_blur = False
     # Keep the synchronised scene (BVH, shaders, OIDN) between renders: a sequence renders each frame at several
-    # resolutions, and without it every render paid ~1 s of set-up (small LR renders 5x, a frame 2x faster).
+    # resolutions, and without it every render paid the set-up again, most of a small LR render's time.
     # Geometry passes come out identical; the colour differs only as two renders of one seed always do (threads).
     scene.render.use_persistent_data = True
     if threads:
@@ -284,8 +284,8 @@ def render_passes(
         cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
         # The albedo and normal guides are noise-free here (every sample of a pixel hits its centre: filter_width
         # ~0, no depth of field or motion blur), so they need no prefilter; OIDN's prefilter would treat texture at
-        # the pixel scale as noise and blur the guides, and the denoised colour with them (on data/mini it kept
-        # 16 % of a fine checker's detail, without prefilter 85 %, against a 512-spp render).
+        # the pixel scale as noise and blur the guides, and the denoised colour with them (docs/results.md, "Data
+        # conventions and what they change").
         cycles.denoising_prefilter = "NONE"
     camera = scene.camera.data
     shift = camera.shift_x, camera.shift_y

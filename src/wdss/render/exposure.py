@@ -2,9 +2,9 @@
 
 Cycles writes radiance in scene units; what those units look like depends on the HDRI, the sun and the
 emitters, and on ``data/mini`` the metric's tone map (Hable, exposure 10, white 11.2: it reaches 1.0 at linear
-1.12) saw 8-72 % saturated values. The renderer therefore scales every frame of a sequence by one factor,
-chosen from quick probes of its first, middle and last frames, so that its median luminance is that of real
-engine frames (DFASR's Unreal sample: pre-tonemap median 0.19, tone-mapped median 0.47, 0.1 % saturated) --
+1.12) saturated a different share of each sequence's values, much of some. The renderer scales each sequence by
+one factor, chosen from quick probes of its first, middle and last frames, so that its median luminance is that of
+real engine frames (DFASR's Unreal sample: pre-tonemap median 0.19, tone-mapped median 0.47, 0.1 % saturated) --
 unless that would saturate more than 1 % of the probes, in which case the bright end decides, within 1.5 stops.
 The factor is recorded in ``sequence.json`` (``exposure``) and applied to every frame and every resolution
 alike, so motion, history and demodulation stay consistent. Pixels of exactly zero radiance (the empty black

@@ -437,10 +437,10 @@ def preset_settings(name: str) -> dict[str, Any]:
 def stale_render(meta: Mapping[str, Any]) -> str | None:
     """Why a sequence wdss rendered earlier (its ``sequence.json``) should be rendered again, or ``None``.
 
-    Before 2026-12-04 OpenImageDenoise ran with its prefilter on frames of 200 pixels and more, which blurred
-    pixel-scale texture out of the high-resolution targets (a fine checker kept 16 % of its detail); and no
-    emission pass was written, without which emitters are demodulated as if lit. Before 2026-12-05 no sampling
-    convention was recorded, and the presets point-sampled their LR folders from the HR frame."""
+    Earlier versions ran OpenImageDenoise with its prefilter on frames of 200 pixels and more, which blurred
+    pixel-scale texture out of the high-resolution targets, and wrote no emission pass, without which emitters are
+    demodulated as if lit; later ones still recorded no sampling convention, and the presets point-sampled their LR
+    folders from the HR frame (when each changed: docs/results.md)."""
     settings = meta.get("settings") or {}
     prefiltered = settings.get("denoise") and min(settings.get("resolution") or [0]) >= 200
     if prefiltered and "denoise_prefilter" not in settings:

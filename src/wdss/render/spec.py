@@ -91,7 +91,7 @@ def _material(rng: np.random.Generator, *, emissive: bool = False) -> Material:
         metallic=metallic,
         bump=float(rng.uniform(0.05, 0.4)),
         # 1-5x the radiance of sun-lit surfaces, as lamps and signs are in games. Brighter whole-object emitters
-        # (up to 60 before) saturate 10 %+ of a frame at any exposure that still shows the rest of the scene.
+        # saturate much of a frame at any exposure that still shows the rest of the scene.
         emission=float(rng.uniform(1.0, 5.0)) if emissive else 0.0,
         emission_color=rng.uniform(0.3, 1.0, 3).round(4).tolist(),
     )

@@ -67,7 +67,7 @@ class ImageMetrics(nn.Module):
 
     @torch.no_grad()
     def forward(self, output: Tensor, target: Tensor, *, flip: bool = True) -> dict[str, Tensor]:
-        """``flip=False`` skips FLIP for this call (it costs ~0.8 s per 384x216 image on a CPU, per range)."""
+        """``flip=False`` skips FLIP for this call (it is slow on a CPU, and runs once per range)."""
         flip = flip and self.flip
         values = self._ldr(self.tone(output, target), self.tone(target, target), flip)
         if flip:

@@ -16,7 +16,7 @@ G-buffer, warped alike, shows the same surface: the channels of :func:`~wdss.ops
 the farthest visible point changes), mean albedo difference at most 0.3 and ``n . n' >= 0.5``. So disocclusions,
 the silhouettes of moving objects and the background (no surface, no normal), which no warp predicts, are left
 out. The thresholds are looser than the spatial mask's (0.1, 0.9): bilinearly warped bump-mapped normals and sharp
-textures differ by more than that on the same surface (on data/mini, 40-60% of pixels would fail them).
+textures differ by more than that on the same surface, so those thresholds would leave out much of every frame.
 
 The sums are pooled over all frame pairs of a sequence (every valid pixel weighs the same); :meth:`compute`
 returns the means over sequences.

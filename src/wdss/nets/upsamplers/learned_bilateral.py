@@ -20,12 +20,12 @@ learning it (on data/mini every seed moved it up).
 
 ``never_raise`` (``recipe.kernel_never_raise``): the correction is capped at 0, so the kernel can lower a tap's
 weight below the fixed kernel's, never raise it. ``raise_within_albedo`` (``recipe.kernel_raise_within_albedo``, on
-for every run since 2026-12-07; both off in checkpoints written before, which load as they were trained): a raise
+by default; both off in checkpoints written before they existed, which load as they were trained): a raise
 counts only as far as the tap's albedo matches the pixel's (it is multiplied by the fixed kernel's albedo range
 term, ``exp(-|albedo difference / range|^2)``); lowering is free. Why: demodulation is exact only where diffuse and
 specular light agree; on a checker of 0.26 and 0.02 blue the blue channel's specular share differs across the edges,
 so the demodulated irradiance keeps them, and a kernel that learned to raise the weights of taps across albedo edges
-(which the training scenes reward) mixed them: 2.3-3.2 dB below joint bilateral on that held-out scene. Capping every
+(which the training scenes reward) mixed them: well below joint bilateral on that held-out scene. Capping every
 raise fixed that scene but cost the seeds whose kernel learned to trust taps of its own surface; raising only within
 one albedo keeps both (docs/results.md). The cap also starves the kernel: its correction starts at the cap, and
 where the last layer's outputs all move above it no gradient reaches the MLP. The two options exclude each other.

@@ -74,8 +74,8 @@ def shuffle_channels_last(x: Tensor) -> Tensor:
     """``pixel_shuffle(x, 2)``, returned channels-last: the same values, one copy.
 
     Written as a permutation of the cells, because torch.compile's CPU code for it is much faster than for
-    ``pixel_shuffle`` of a channels-last tensor (48 -> 12 channels at 1080p: 64 vs 157 ms, the add before it
-    fused in); eager takes the same time either way. An exported graph keeps ``pixel_shuffle``: one
+    ``pixel_shuffle`` of a channels-last tensor (the add before it fused in; docs/performance.md); eager takes the
+    same time either way. An exported graph keeps ``pixel_shuffle``: one
     ``DepthToSpace`` node, which engines know.
     """
     if torch.compiler.is_exporting():
@@ -404,7 +404,7 @@ class WDSSNet(nn.Module):
         if residual != "none":
             # exit_init 0: the network starts exactly as its upsampler (its correction is zero); > 0 scales the
             # default initialisation instead: a zero exit passes no gradient to the layers before it, which then
-            # stay at their random initialisation for long (measured: exit weights ~1e-3 after 480 steps).
+            # stay at their random initialisation for long, as the exit's own weights grow only slowly.
             with torch.no_grad():
                 self.exit.weight.mul_(exit_init)
                 self.exit.bias.mul_(exit_init)
@@ -491,8 +491,8 @@ class WDSSNet(nn.Module):
             coefficients = None
         else:
             if self.transform == "swt":
-                # Channels-last from here on: on CPU the exit convolution of 12 full-resolution channels runs
-                # ~1.35x faster in it, the shuffle ~2.5x and the synthesis' convolutions 2-3x, without a padded copy.
+                # Channels-last from here on: on CPU the exit convolution of 12 full-resolution channels, the shuffle
+                # and the synthesis' convolutions all run faster in it, and the synthesis needs no padded copy.
                 merged = shuffle_channels_last(merged)
             coefficients = self.exit(merged).float()
             # The synthesis stays float32 under mixed precision: it sums large subbands that nearly cancel.

@@ -5,8 +5,8 @@ maps, then the circular filter bank. :func:`swt_tail_on_cells` computes the same
 on the half-resolution grid) without going to full resolution until the end: every convolution is rewritten as one on
 2x2 cells (its *polyphase* form), the exit convolution and the synthesis' H step (both linear) become one convolution,
 and only the 3-channel image is moved to pixels. The network takes this form when no subbands are asked for and the
-cells are channels-last, and in exported graphs. At 1080p 2x, eager, on channels-last cells the tail takes 146 ms
-against 200 ms for the direct form; on NCHW cells oneDNN's reorders of its convolutions take that gain back.
+cells are channels-last, and in exported graphs. On channels-last cells it is faster than the direct form
+(docs/performance.md); on NCHW cells oneDNN's reorders of its convolutions take that gain back.
 
 Cells. Channel ``c * 4 + 2 * py + px`` of a cell tensor is pixel ``(2 y + py - s, 2 x + px - s)`` of channel ``c``
 (torch's ``pixel_shuffle`` order), where ``s`` is 0 on the standard grid and 1 on the *shifted* grid. The exit
@@ -134,7 +134,7 @@ def _phase_major(weight: Tensor) -> Tensor:
 
 def _cells_to_image(cells: Tensor) -> Tensor:
     """(N, 4 C, h, w) cells with phase-major channels -> (N, C, 2 h, 2 w) in channels-last memory. From channels-last
-    cells each output row segment is a copy of 2 C consecutive values (4 ms at 1080p; ``pixel_shuffle`` 16 ms)."""
+    cells each output row segment is a copy of 2 C consecutive values, much faster than ``pixel_shuffle``."""
     n, c, h, w = cells.shape
     pixels = cells.permute(0, 2, 3, 1).reshape(n, h, w, 2, 2, c // 4).transpose(2, 3).reshape(n, 2 * h, 2 * w, c // 4)
     return pixels.permute(0, 3, 1, 2)
@@ -178,5 +178,5 @@ def swt_tail_on_cells(merged: Tensor, exit_weight: Tensor, exit_bias: Tensor, ro
 def _eager_tail(merged: Tensor, exit_weight: Tensor, exit_bias: Tensor, rows: Tensor) -> Tensor:
     # torch.compile runs the tail eagerly. Compiled, Inductor turns the seam writes into copies of the whole
     # convolution output and fuses the last one, the move to pixels and the remodulation after it into one loop over
-    # NCHW pixels that gathers every value: at 1080p that loop alone took 125 ms, the whole tail 140 ms eagerly.
+    # NCHW pixels that gathers every value, which alone takes about as long as the whole tail run eagerly.
     return swt_tail_on_cells(merged, exit_weight, exit_bias, rows)
