@@ -660,3 +660,12 @@ def test_the_methods_sweep_runs_every_method_at_smoke_scale(tmp_path):
     for variant, run in jobs.items():  # where flicker shows: a video of every method and baseline
         videos = {a.path for a in client.list_artifacts(run.info.run_id, "videos")}
         assert videos == {"videos/fixture_000_3x.mp4", "videos/fixture_000_3x_crop.gif"}, variant
+
+
+def test_where_a_run_is_tracked_is_no_part_of_its_name(tmp_path, tracking):
+    """A run logged to another store (logger.tracking_uri=...) is the same experiment: its name says what ran."""
+    from wdss.tracking import run_name
+
+    uri = f"sqlite:///{tmp_path}/other.db"
+    cfg = compose_train(["experiment=smoke", "variant=swt_db4", f"logger.tracking_uri={uri}"], tmp_path)
+    assert run_name(cfg) == "swt_db4 · smoke · seed0 · rendered"

@@ -167,7 +167,7 @@ def run_name(cfg: DictConfig) -> str:
     defaults = _default_choices()
     items = []
     for key, value in split_overrides(run_overrides(cfg)):
-        if key in said or key.startswith(("paths.", "hydra.", "tags.")):
+        if key in said or key.startswith(("paths.", "hydra.", "tags.", "logger.")):  # where, not what, it ran
             continue
         if value is None:
             items.append((key, f"~{key}"))
