@@ -315,7 +315,7 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
             net = WDSSNet(transform, basis if basis != "-" else "haar", head, **kwargs).to(device).eval()
         else:
             net = other.to(device).eval()
-        row_scale = float(net.scale) if getattr(net, "fixed_scale", False) else scale
+        row_scale = float(net.scale) if net.fixed_scale else scale
         key = (tuple(inspect.signature(net.forward).parameters), row_scale)
         inputs = shared.setdefault(key, dummy_inputs(net, height, width, row_scale, device))
         params = sum(p.numel() for p in net.parameters())
@@ -712,9 +712,9 @@ class StartArm(torch.nn.Module):
 
     def __init__(self, net: torch.nn.Module) -> None:
         super().__init__()
-        kernel = getattr(net, "upsampler", None)
+        kernel = net.upsampler
         self.kernel = copy.deepcopy(kernel) if kernel is not None else None
-        self.residual = getattr(net, "residual", "none")
+        self.residual = net.residual
         self.name = (
             "kernel"
             if self.kernel is not None

@@ -226,7 +226,7 @@ def export_onnx(
     # torch.onnx warns that torchvision's operators are not registered: wdss uses none of them
     logging.getLogger("torch.onnx._internal.exporter._registration").setLevel(logging.ERROR)
     net = module.net.eval()
-    if getattr(net, "fixed_scale", False) and float(scale) != float(net.scale):
+    if net.fixed_scale and float(scale) != float(net.scale):
         raise ExportError(f"this {net.__class__.__name__} upsamples by {net.scale} only, not by {scale}")
     fold_rir_blocks(net)
     graph = InferenceGraph(net).eval()
@@ -396,7 +396,7 @@ def input_layout(
             ),
         },
         # The graph applies log1p to lr and history itself: feed linear values.
-        "log1p_inside": bool(getattr(net, "input_log", False)),
+        "log1p_inside": bool(net.input_log),
         "exposure": (
             "colour (and emission) is linear radiance pre-exposed as the training frames were: wdss's renders "
             "multiply every frame of a sequence, at every resolution, by one factor that brings the median Rec. 709 "

@@ -281,7 +281,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
 
     module = instantiate(cfg.model, tonemap_exposure=cfg.get("tonemap_exposure"))
     fitting = module.trainable and cfg.get("fit", True)
-    if getattr(module.net, "needs_training", False) and not fitting and cfg.get("test"):
+    if module.net.needs_training and not fitting and cfg.get("test"):
         raise ConfigError(
             f"{type(module.net).__name__} has no weights: set model.net.weights to the published file, or train it "
             "on these frames (fit=true); numbers from random weights are never reported"
@@ -322,7 +322,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
         if resume_run:
             status_before = _check_resumable(MlflowClient(uri), resume_run, str(uri), ckpt_path)
     tags = run_tags(cfg)
-    if hasattr(module.net, "needs_training"):  # which weights a pretrained-capable baseline reports with
+    if module.net.loads_published_weights:  # which weights it reports with (wdss.nets.base)
         tags["weights"] = f"published:{module.net.weights}" if module.net.weights else "trained-on-wdss-frames"
     # Other ranks get the logger too, but MLFlowLogger creates its run and logs on rank 0 only.
     trainer.logger = logger = instantiate(cfg.logger, run_name=name, tags=tags, run_id=resume_run)
@@ -444,7 +444,7 @@ def _bench(cfg: DictConfig, module: Any, logger: Any) -> dict[str, float]:
     if not bench:
         return {}
     net = module.net.eval()
-    scale = float(net.scale) if getattr(net, "fixed_scale", False) else float(bench.scale)
+    scale = float(net.scale) if net.fixed_scale else float(bench.scale)
     inputs = dummy_inputs(net, int(bench.height), int(bench.width), scale, str(module.device))
     total, _ = flops(net, inputs)
     values = {

@@ -229,7 +229,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
     seq = Sequence(str(cfg.input), str(cfg.layout))
     scale = float(cfg.scale)
     net = module.net
-    if getattr(net, "fixed_scale", False) and scale != float(net.scale):
+    if net.fixed_scale and scale != float(net.scale):
         raise UpscaleError(f"the model ({net.__class__.__name__}) upsamples by {net.scale} only, not by {scale:g}")
     warning = scale_warning(scale, trained_scales(ckpt))
     if warning:

@@ -34,8 +34,9 @@ def _plain(config: Any) -> Any:
 class SuperResolutionModule(L.LightningModule):
     """Train and evaluate one super-resolution model.
 
-    ``net``: a ``_target_`` mapping of a network with an ``inputs`` property and a forward returning
-    ``{"irradiance", "coefficients"}`` (:class:`~wdss.nets.wdss.network.WDSSNet`, a baseline) or such a module.
+    ``net``: a ``_target_`` mapping of a network that keeps :class:`~wdss.nets.base.SuperResolutionNet`'s contract
+    (its ``inputs``, a forward returning ``{"irradiance", "coefficients"}``: :class:`~wdss.nets.wdss.network.WDSSNet`,
+    a baseline) or such a module.
     ``loss_weights``: see :class:`~wdss.training.losses.WDSSLoss`. ``optimizer``/``scheduler``: ``_partial_``
     ``_target_`` mappings. ``lpips``: ``{"backbone": path, "linear": path}`` of local weight files, or None.
     ``temporal``: ``gt_history``, ``recurrent`` or ``none`` (default: whatever the network's branch implies).
@@ -90,7 +91,7 @@ class SuperResolutionModule(L.LightningModule):
             check_targets(hparams.get(key), key)
         self.net = net if isinstance(net, nn.Module) else instantiate(hparams["net"], at="net")
         if temporal is None:  # follow the network: a temporal branch trains on ground-truth history by default
-            temporal = "gt_history" if "history" in getattr(self.net, "inputs", ()) else "none"
+            temporal = "gt_history" if "history" in self.net.inputs else "none"
             hparams["temporal"] = temporal
         self.save_hyperparameters(hparams)
         lpips_model = LPIPS(lpips["backbone"], lpips["linear"]) if lpips else None
@@ -110,7 +111,7 @@ class SuperResolutionModule(L.LightningModule):
     def _check_temporal(self) -> None:
         if self.temporal not in ("gt_history", "recurrent", "none"):
             raise ValueError(f"model.temporal must be gt_history, recurrent or none, got {self.temporal!r}")
-        has_branch = "history" in getattr(self.net, "inputs", ())
+        has_branch = "history" in self.net.inputs
         if has_branch != (self.temporal != "none"):
             raise ValueError(
                 f"model.temporal={self.temporal} but the network {'has' if has_branch else 'has no'} temporal branch"

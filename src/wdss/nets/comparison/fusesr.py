@@ -19,12 +19,13 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from wdss.nets.base import SuperResolutionNet
 from wdss.nets.blocks import DoubleResidual, from_log, scale_exit, to_log
 
 __all__ = ["FuseSR"]
 
 
-class FuseSR(nn.Module):
+class FuseSR(SuperResolutionNet):
     """FuseSR for one integer ``scale``; ``width`` channels and ``blocks`` residual blocks."""
 
     fixed_scale = True  # benchmarks run it at its own scale

@@ -19,6 +19,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from wdss.nets.base import SuperResolutionNet
 from wdss.nets.blocks import from_log, scale_exit, to_log
 from wdss.ops.warp import warp_backward
 
@@ -39,7 +40,7 @@ def _block(cin: int, cout: int) -> nn.Sequential:
     return nn.Sequential(nn.Conv2d(cin, cout, 3, padding=1), nn.ReLU(), nn.Conv2d(cout, cout, 3, padding=1), nn.ReLU())
 
 
-class NSRR(nn.Module):
+class NSRR(SuperResolutionNet):
     """NSRR with one history frame. ``widths``: feature extractor; ``unet``: U-Net widths per level."""
 
     def __init__(

@@ -19,6 +19,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from wdss.nets.base import SuperResolutionNet
 from wdss.nets.blocks import from_log, scale_exit, to_log
 from wdss.ops.tonemap import tonemap
 
@@ -53,7 +54,7 @@ class RRDB(nn.Module):
         return x + 0.2 * self.rdb3(self.rdb2(self.rdb1(x)))
 
 
-class RRDBNet(nn.Module):
+class RRDBNet(SuperResolutionNet):
     """RRDBNet x4 (two nearest-upsample + conv stages); x2 by pixel-unshuffling the input first.
 
     Defaults are Real-ESRGAN's (23 blocks, 64 features, growth 32: ~16.7 M parameters). ``weights``: a local
@@ -61,6 +62,7 @@ class RRDBNet(nn.Module):
     """
 
     transform = "none"
+    loads_published_weights = True  # wdss.nets.base: a run tags which weights it reports
 
     def __init__(
         self,

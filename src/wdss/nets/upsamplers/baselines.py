@@ -8,14 +8,15 @@ places a jittered LR frame's pixels where they were shaded (``lr_jitter``).
 
 from __future__ import annotations
 
-from torch import Tensor, nn
+from torch import Tensor
 
+from wdss.nets.base import SuperResolutionNet
 from wdss.ops.sampling import upsample
 
 __all__ = ["Upsample"]
 
 
-class Upsample(nn.Module):
+class Upsample(SuperResolutionNet):
     """A parameter-free baseline: ``mode`` is ``bilinear`` or ``bicubic``; ``demodulated`` upsamples irradiance."""
 
     def __init__(self, mode: str = "bilinear", demodulated: bool = False) -> None:

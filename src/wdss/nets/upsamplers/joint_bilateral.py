@@ -26,8 +26,9 @@ from collections.abc import Iterator
 from typing import NamedTuple
 
 import torch
-from torch import Tensor, nn
+from torch import Tensor
 
+from wdss.nets.base import SuperResolutionNet
 from wdss.ops.sampling import centred, point_sample
 
 __all__ = [
@@ -213,7 +214,7 @@ def joint_bilateral_upsample(
     return accumulated / total
 
 
-class JointBilateralUpsample(nn.Module):
+class JointBilateralUpsample(SuperResolutionNet):
     """Parameter-free baseline: :func:`joint_bilateral_upsample` of the demodulated LR irradiance, remodulated with
     the HR BRDF factor (``demodulated``), or of the LR colour itself (``demodulated=False``: the taps' colours,
     each remodulated by its own BRDF factor, as a colour-space joint bilateral filter)."""

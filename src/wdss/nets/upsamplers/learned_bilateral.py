@@ -41,6 +41,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
+from wdss.nets.base import SuperResolutionNet
 from wdss.nets.upsamplers.joint_bilateral import check_ranges, joint_bilateral_upsample, neighbourhood, range_weight
 
 __all__ = ["LearnedBilateralUpsample"]
@@ -54,7 +55,7 @@ _DIFFERENCE_LIMIT = 5.0
 _LOGIT_LIMIT = 8.0
 
 
-class LearnedBilateralUpsample(nn.Module):
+class LearnedBilateralUpsample(SuperResolutionNet):
     """Joint bilateral upsampling of ``lr`` guided by ``gbuffer`` with learned per-tap weight corrections.
 
     ``hidden``: width of the per-tap MLP (two hidden 1x1 layers); ``context``: channels of the G-buffer context

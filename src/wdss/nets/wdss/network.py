@@ -22,6 +22,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from wdss.nets.base import SuperResolutionNet
 from wdss.nets.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3, from_log, to_log
 from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
 from wdss.nets.upsamplers.learned_bilateral import LearnedBilateralUpsample
@@ -289,7 +290,7 @@ class Refinement(nn.Module):
         return self.body(torch.cat([log_image, guide], 1))
 
 
-class WDSSNet(nn.Module):
+class WDSSNet(SuperResolutionNet):
     """The WDSS super-resolution network for one transform x basis x head x temporal choice.
 
     ``transform``: ``none | dwt | swt``; ``basis``: an orthogonal PyWavelets basis; ``head``:
