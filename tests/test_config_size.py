@@ -8,8 +8,6 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from wdss.nets.wdss.network import WIDTHS
-
 CONF = Path(__file__).resolve().parents[1] / "conf"
 # variant -> the size/ entry its model reads; None: plain WDSS (the default model).
 LEARNED = {None: "wdss", "dfasr": "wdss", "nsrr": "nsrr", "fusesr": "fusesr", "real_esrgan": "real_esrgan"}
@@ -54,6 +52,16 @@ def test_the_two_sizes_differ_for_every_learned_model():
         assert preset("small", entry) != preset("paper", entry), entry
 
 
-def test_the_small_wdss_preset_is_the_networks_small_widths():
-    small = {k: list(v) if isinstance(v, tuple) else v for k, v in WIDTHS["small"].items()}
-    assert {k: v for k, v in preset("small", "wdss").items() if k != "lr"} == small
+def test_what_benchmarks_build_outside_a_run_is_read_from_the_size_and_model_configs():
+    """One source for widths and DFASR's settings: wdss.config.sizes reads conf/size and conf/model, which runs
+    compose; the benchmarks keep no copy."""
+    from wdss.bench import DFASR
+    from wdss.config.sizes import model_net_settings, size_widths
+
+    for size in ("small", "paper"):
+        for entry in set(LEARNED.values()):
+            assert size_widths(size, entry) == {k: v for k, v in preset(size, entry).items() if k != "lr"}
+    assert model_net_settings("dfasr") == DFASR
+    assert DFASR["transform"] == "none" and DFASR["lr_unshuffle"] is False
+    with pytest.raises(ValueError, match="no size 'huge'"):
+        size_widths("huge")

@@ -19,6 +19,7 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
+from wdss.config.sizes import model_net_settings, size_widths
 from wdss.data.preprocess import prediction_color
 from wdss.memory import memory_retained, restart_with_retained_memory
 from wdss.nets.blocks import from_log, to_log
@@ -296,10 +297,10 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     import inspect
 
     from wdss.nets.profile import dummy_inputs, flops
-    from wdss.nets.wdss.network import HEADS, WIDTHS, WDSSNet
+    from wdss.nets.wdss.network import HEADS, WDSSNet
 
     height, width = size
-    kwargs = {} if widths == "paper" else WIDTHS["small"]
+    kwargs = {} if widths == "paper" else size_widths("small")
     variants = [("none", "-", "shared_inr")] + [(t, b, h) for t in ("dwt", "swt") for b in BASES for h in HEADS]
     table = Table(
         title=f"inference at {width}x{height} output, {scale}x, {widths} widths, {device}, {repeats} interleaved rounds"
@@ -335,15 +336,8 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     return table
 
 
-# DFASR as a WDSSNet (conf/model/dfasr.yaml): the full LR grid, its G-buffer subset, its fusion and phase.
-DFASR = dict(
-    transform="none",
-    lr_unshuffle=False,
-    gbuffer_channels=[3, 4, 5, 6, 0, 1, 2],
-    fusion_final_relu=True,
-    phase_bias=False,
-    final_relu=False,
-)
+# DFASR as a WDSSNet, as conf/model/dfasr.yaml sets it: the full LR grid, its G-buffer subset, its fusion and phase.
+DFASR = model_net_settings("dfasr")
 
 
 def comparison_models(widths: str) -> dict:
@@ -351,12 +345,12 @@ def comparison_models(widths: str) -> dict:
     from wdss.nets.comparison.fusesr import FuseSR
     from wdss.nets.comparison.nsrr import NSRR
     from wdss.nets.comparison.rrdbnet import RRDBNet
-    from wdss.nets.wdss.network import WIDTHS, WDSSNet
+    from wdss.nets.wdss.network import WDSSNet
 
     small = widths != "paper"
     return {
-        "DFASR": WDSSNet(**DFASR, **(WIDTHS["small"] if small else {})),
-        "Real-ESRGAN": RRDBNet(scale=2, **(dict(num_feat=32, num_block=4, num_grow_ch=16) if small else {})),
+        "DFASR": WDSSNet(**DFASR, **(size_widths("small") if small else {})),
+        "Real-ESRGAN": RRDBNet(scale=2, **(size_widths("small", "real_esrgan") if small else {})),
         "NSRR": NSRR(),
         "FuseSR": FuseSR(scale=2),
     }

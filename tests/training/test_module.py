@@ -10,7 +10,7 @@ from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
 from tests.helpers import TINY, batch, losses_over_steps
 from tests.nets.wdss.test_network import VARIANTS
-from wdss.nets.wdss.network import WIDTHS
+from wdss.config.sizes import size_widths
 from wdss.training.losses import WDSSLoss, temporal_difference_loss
 from wdss.training.metrics import LPIPS, psnr, ssim
 from wdss.training.module import SuperResolutionModule
@@ -53,7 +53,7 @@ def test_the_small_preset_overfits_one_fixture_patch():
     from wdss.data import SceneDataModule
 
     torch.manual_seed(0)
-    small = WIDTHS["small"]
+    small = size_widths("small")
     model = module(
         "swt",
         "db4",

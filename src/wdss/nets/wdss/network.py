@@ -38,19 +38,9 @@ OUTPUT_SPACES = ("linear", "log")
 # What the head adds its prediction to: nothing (the paper), or the LR irradiance upsampled by a fixed method or by
 # joint bilateral upsampling with learned tap weights (trained with the network, starting as joint bilateral).
 RESIDUALS = ("none", "bilinear", "joint_bilateral", "learned_bilateral")
-# Width presets besides the paper's defaults (conf/size/small.yaml mirrors "small"): "small" trains in minutes
-# on 2 CPU cores; "tiny" is for tests and stability checks.
+# A width preset for tests and stability checks (the presets runs use are the size configs, conf/size/*.yaml:
+# wdss.config.sizes reads them).
 WIDTHS: dict[str, dict] = {
-    "small": dict(
-        lr_widths=(16, 24, 24, 32),
-        gbuffer_width=32,
-        temporal_widths=(16, 16, 8),
-        fusion_widths=(32, 24),
-        inr_width=32,
-        mlp_width=32,
-        mlp_depth=2,
-        multi_inr_width=16,
-    ),
     "tiny": dict(
         lr_widths=(8, 8, 8, 8),
         gbuffer_width=8,
