@@ -14,6 +14,7 @@ import signal
 import sys
 import textwrap
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -272,15 +273,30 @@ def train(cfg: DictConfig) -> dict[str, float]:
     output_dir = Path(str(cfg.paths.output_dir))
     output_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path, resume_run = _resume(cfg)
-    resumed_step = -1  # the global step a resumed run's checkpoint holds: a failure before passing it is the resume's
-    if ckpt_path is not None and cfg.get("ckpt_path") == "last":  # an explicit path was read in validate()
-        try:
-            resumed_step = int(read_checkpoint(ckpt_path).get("global_step", 0))  # data, checked as any other
-        except CheckpointError as err:
-            raise ConfigError(f"ckpt_path=last: {err}") from err
+    resumed_step = _resumed_step(cfg, ckpt_path)
+    module, datamodule, fitting = _model_and_data(cfg)
+    trainer = _trainer(cfg, module, output_dir)
+    logger, status_before = _tracked_run(cfg, trainer, module, output_dir, resume_run, ckpt_path)
+    run = _Run(trainer, module, datamodule, logger, fitting, ckpt_path, output_dir, status_before, resumed_step)
+    return _fit_and_test(cfg, run)
 
+
+def _resumed_step(cfg: DictConfig, ckpt_path: str | None) -> int:
+    """The global step a resumed run's checkpoint holds (-1 without one): a failure before passing it is the
+    resume's, not the run's."""
+    if ckpt_path is None or cfg.get("ckpt_path") != "last":  # an explicit path was read in validate()
+        return -1
+    try:
+        return int(read_checkpoint(ckpt_path).get("global_step", 0))  # data, checked as any other
+    except CheckpointError as err:
+        raise ConfigError(f"ckpt_path=last: {err}") from err
+
+
+def _model_and_data(cfg: DictConfig) -> tuple[Any, Any, bool]:
+    """The module, the data module reading what it needs, and whether this run fits; refused before any run
+    starts when the model has no weights to report or a split's data is missing."""
     module = instantiate(cfg.model, tonemap_exposure=cfg.get("tonemap_exposure"))
-    fitting = module.trainable and cfg.get("fit", True)
+    fitting = bool(module.trainable and cfg.get("fit", True))
     if module.net.needs_training and not fitting and cfg.get("test"):
         raise ConfigError(
             f"{type(module.net).__name__} has no weights: set model.net.weights to the published file, or train it "
@@ -288,8 +304,12 @@ def train(cfg: DictConfig) -> dict[str, float]:
         )
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
     # A missing data root or sequence of the splits this run reads: refused before any run starts.
-    datamodule.check(["train", "val"] * bool(fitting) + ["test"] * bool(cfg.get("test")))
-    name = run_name(cfg)
+    datamodule.check(["train", "val"] * fitting + ["test"] * bool(cfg.get("test")))
+    return module, datamodule, fitting
+
+
+def _trainer(cfg: DictConfig, module: Any, output_dir: Path) -> L.Trainer:
+    """The Trainer with the config's callbacks, progress and (with video) the test videos."""
     multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
     callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + progress_callbacks(multirun=multirun)
     if cfg.get("video") and cfg.get("test"):
@@ -311,6 +331,14 @@ def train(cfg: DictConfig) -> dict[str, float]:
             "video=true needs one process (under DDP each rank tests a share of the frames): test the checkpoint "
             "with python -m wdss.eval ckpt_path=PATH video=true"
         )
+    return trainer
+
+
+def _tracked_run(
+    cfg: DictConfig, trainer: L.Trainer, module: Any, output_dir: Path, resume_run: str | None, ckpt_path: str | None
+) -> tuple[Any, str | None]:
+    """The MLflow run this training logs to (a new one, or the one it resumes), with its tags, params, config and
+    Hydra record, and the run's files in its folder; and the status of a resumed run before this process."""
     uri = OmegaConf.select(cfg, "logger.tracking_uri")
     status_before = None  # of the run a resume continues
     if uri and trainer.is_global_zero:
@@ -324,6 +352,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     tags = run_tags(cfg)
     if module.net.loads_published_weights:  # which weights it reports with (wdss.nets.base)
         tags["weights"] = f"published:{module.net.weights}" if module.net.weights else "trained-on-wdss-frames"
+    name = run_name(cfg)
     # Other ranks get the logger too, but MLFlowLogger creates its run and logs on rank 0 only.
     trainer.logger = logger = instantiate(cfg.logger, run_name=name, tags=tags, run_id=resume_run)
     if trainer.is_global_zero:
@@ -342,17 +371,39 @@ def train(cfg: DictConfig) -> dict[str, float]:
     hydra_dir = output_dir / ".hydra"
     if hydra_dir.is_dir():
         experiment.log_artifacts(run_id, str(hydra_dir), ".hydra")
+    return logger, status_before
 
+
+@dataclass
+class _Run:
+    """What a training run fits and tests with, and what its failure handling needs to know."""
+
+    trainer: L.Trainer
+    module: Any
+    datamodule: Any
+    logger: Any
+    fitting: bool
+    ckpt_path: str | None
+    output_dir: Path
+    status_before: str | None  # of the run a resume continues
+    resumed_step: int
+
+
+def _fit_and_test(cfg: DictConfig, run: _Run) -> dict[str, float]:
+    """Fit (unless the model trains nothing), test the best checkpoint of this run, bench; a failure finalises the
+    MLflow run as FAILED (or as it was, when a resume failed before its first step), a signal as KILLED."""
+    trainer, module, datamodule, logger = run.trainer, run.module, run.datamodule, run.logger
+    experiment, run_id = logger.experiment, logger.run_id
     metrics: dict[str, float] = {}
     try:
         start = time.perf_counter()
-        if fitting:
-            trainer.fit(module, datamodule=datamodule, ckpt_path=ckpt_path, weights_only=True)
+        if run.fitting:
+            trainer.fit(module, datamodule=datamodule, ckpt_path=run.ckpt_path, weights_only=True)
             experiment.log_metric(run_id, "time/train_s", time.perf_counter() - start)
             metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
             metrics["trainer/global_step"] = float(trainer.global_step)
         if cfg.get("test"):
-            best = getattr(trainer.checkpoint_callback, "best_model_path", "") if fitting else ""
+            best = getattr(trainer.checkpoint_callback, "best_model_path", "") if run.fitting else ""
             best = _own_checkpoint(best, cfg, run_id)
             if best:
                 read_checkpoint(best)  # a file of this run is still data: checked before Lightning loads it
@@ -371,20 +422,20 @@ def train(cfg: DictConfig) -> dict[str, float]:
         if stopped_by is None:
             log_exception(error, "wdss.train")
             log_files_to_mlflow(experiment, run_id, "wdss.train")
-            if status_before is not None and trainer.global_step <= resumed_step:
+            if run.status_before is not None and trainer.global_step <= run.resumed_step:
                 # The resume failed before training a step: the run stays what it was (KILLED, say), not FAILED.
                 experiment.set_tag(run_id, "resume_error", f"{type(error).__name__}: {error}"[:500])
-                logger.finalize(status_before)
+                logger.finalize(run.status_before)
             else:
                 logger.finalize("FAILED")
             raise
         logger.finalize("KILLED")
-        print(f"wdss.train: stopped by {stopped_by.name}; resume with ckpt_path=last (checkpoints in {output_dir})")
+        print(f"wdss.train: stopped by {stopped_by.name}; resume with ckpt_path=last (checkpoints in {run.output_dir})")
         log_files_to_mlflow(experiment, run_id, "wdss.train")
         raise SystemExit(128 + stopped_by) from error
     finally:
         if trainer.is_global_zero:
-            (output_dir / LOCK_FILE).unlink(missing_ok=True)
+            (run.output_dir / LOCK_FILE).unlink(missing_ok=True)
     return metrics
 
 
