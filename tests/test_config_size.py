@@ -55,13 +55,13 @@ def test_the_two_sizes_differ_for_every_learned_model():
 def test_what_benchmarks_build_outside_a_run_is_read_from_the_size_and_model_configs():
     """One source for widths and DFASR's settings: wdss.config.sizes reads conf/size and conf/model, which runs
     compose; the benchmarks keep no copy."""
-    from wdss.bench import DFASR
+    from wdss.bench import dfasr_settings, inference_settings
     from wdss.config.sizes import model_net_settings, size_widths
 
     for size in ("small", "paper"):
         for entry in set(LEARNED.values()):
             assert size_widths(size, entry) == {k: v for k, v in preset(size, entry).items() if k != "lr"}
-    assert model_net_settings("dfasr") == DFASR
-    assert DFASR["transform"] == "none" and DFASR["lr_unshuffle"] is False
+    assert dfasr_settings() == inference_settings("DFASR") == model_net_settings("dfasr")
+    assert dfasr_settings()["transform"] == "none" and dfasr_settings()["lr_unshuffle"] is False
     with pytest.raises(ValueError, match="no size 'huge'"):
         size_widths("huge")

@@ -336,8 +336,10 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     return table
 
 
-# DFASR as a WDSSNet, as conf/model/dfasr.yaml sets it: the full LR grid, its G-buffer subset, its fusion and phase.
-DFASR = model_net_settings("dfasr")
+def dfasr_settings() -> dict:
+    """DFASR as a WDSSNet, as conf/model/dfasr.yaml sets it (the full LR grid, its G-buffer subset, its fusion and
+    phase); read when a benchmark builds it, not when this module is imported."""
+    return model_net_settings("dfasr")
 
 
 def comparison_models(widths: str) -> dict:
@@ -349,7 +351,7 @@ def comparison_models(widths: str) -> dict:
 
     small = widths != "paper"
     return {
-        "DFASR": WDSSNet(**DFASR, **(size_widths("small") if small else {})),
+        "DFASR": WDSSNet(**dfasr_settings(), **(size_widths("small") if small else {})),
         "Real-ESRGAN": RRDBNet(scale=2, **(size_widths("small", "real_esrgan") if small else {})),
         "NSRR": NSRR(),
         "FuseSR": FuseSR(scale=2),
@@ -364,8 +366,16 @@ INFERENCE_CONFIGS = {
     "none": dict(transform="none"),
     "DWT-haar": dict(transform="dwt", basis="haar"),
     "SWT-db4": dict(transform="swt", basis="db4"),
-    "DFASR": DFASR,
+    "DFASR": "dfasr",  # a model config, read when built (inference_settings)
 }
+
+
+def inference_settings(name: str) -> dict:
+    """The WDSSNet keyword arguments of an inference-table row: its own, or those of the model config it names."""
+    settings = INFERENCE_CONFIGS[name]
+    return model_net_settings(settings) if isinstance(settings, str) else settings
+
+
 BACKENDS = ("eager", "compile", "onnxruntime")
 # On a GPU onnxruntime is left out (its CPU provider is what wdss installs) and CUDA graphs come in: torch.compile's
 # "reduce-overhead" mode records the compiled graph once and replays it, so no kernel is launched from Python.
@@ -551,7 +561,7 @@ def bench_inference(
         built = {}
         for name in configs:
             torch.manual_seed(0)  # the same weights on every run: a rerun times the same networks
-            net = WDSSNet(**INFERENCE_CONFIGS[name]).eval()
+            net = WDSSNet(**inference_settings(name)).eval()
             built[name] = _inference_runners(net, height, width, scale, backends, f"{tmp}/{name}", device, dtype)
         runners = {(name, backend): built[name][0][backend] for name in configs for backend in backends}
         with torch.inference_mode():
