@@ -4,7 +4,7 @@
 Writes the model a checkpoint holds as one ONNX graph (opset >= 17) for an engine: the whole network, wavelet
 synthesis included, with its RIR blocks folded into their 3x3 convolutions first, and the remodulation by the BRDF
 factor, so that the graph maps the inputs an engine can compute to the HR colour. Inputs are named by their batch
-keys (:mod:`wdss.data.datamodule`), ``scale`` among them; outputs are ``color`` (linear HDR) and ``irradiance``
+keys (:mod:`wdss.data.batch`), ``scale`` among them; outputs are ``color`` (linear HDR) and ``irradiance``
 (the demodulated prediction, which a recurrent model feeds back). Beside it, ``<name>.json`` describes the input
 layout an engine must feed: channels and their order, resolution, demodulation, what the graph applies itself
 (log1p), the radiance's exposure, the motion vectors' convention and, for a temporal model, how to make its history
@@ -28,8 +28,8 @@ from omegaconf import DictConfig, OmegaConf
 from torch import Tensor, nn
 
 from wdss.checkpoint import read_checkpoint, training_preprocessing
-from wdss.data.dataset import GBUFFER_STACK, Preprocessing
-from wdss.data.preprocess import LR_GUIDE
+from wdss.data.batch import GBUFFER_STACK, LR_GEOMETRY, LR_GUIDE
+from wdss.data.dataset import Preprocessing
 from wdss.errors import UserError, entry_point
 from wdss.nets.blocks import RIRBlock, fold_rir_blocks
 from wdss.nets.profile import dummy_inputs
@@ -55,7 +55,7 @@ def _channels(buffer: str) -> list[str]:
 
 
 # Engine-facing description of every batch key a graph may take: resolution (high or low), channels in order,
-# meaning. The one contract between data and model (wdss.data.datamodule), written out for another renderer.
+# meaning. The one contract between data and model (wdss.data.batch), written out for another renderer.
 CHANNELS: dict[str, tuple[str, list[str], str]] = {
     "lr": (
         "low",
@@ -89,9 +89,13 @@ CHANNELS: dict[str, tuple[str, list[str], str]] = {
         "temporal.temporal_mask",
     ),
     "motion": ("high", ["motion.x", "motion.y"], "HR pixels, current minus previous position, y up"),
-    "lr_gbuffer": ("low", ["depth", *_channels("normal")], "LR depth and normal"),
+    "lr_gbuffer": ("low", [c for b in LR_GEOMETRY for c in _channels(b)], "LR depth and normal"),
     "prev_lr_color": ("low", list(_RGB), "the previous frame's LR colour"),
-    "prev_lr_gbuffer": ("low", ["depth", *_channels("normal")], "the previous frame's LR depth and normal"),
+    "prev_lr_gbuffer": (
+        "low",
+        [c for b in LR_GEOMETRY for c in _channels(b)],
+        "the previous frame's LR depth and normal",
+    ),
     "history2": ("high", list(_RGB), "irradiance of frame t-2 warped to t through t-1"),
 }
 

@@ -1,38 +1,8 @@
 """The LightningDataModule: scenes on disk -> batches of named float32 tensors.
 
-Batch keys (only those the model asks for are built, and only the files they need are opened):
-
-=================  ===========================  ================================================================
-key                shape                        meaning
-=================  ===========================  ================================================================
-``target``         (N, 3, H, W)                 high-resolution linear HDR colour (ground truth)
-``brdf``           (N, 3, H, W)                 high-resolution BRDF factor F, 1 where F vanishes
-``lr``             (N, 3, h, w)                 low-resolution input: irradiance (colour - emission) / F_lr (or
-                                                colour when ``preprocessing.demodulate`` is false)
-``lr_color``       (N, 3, h, w)                 low-resolution colour (for image-space baselines)
-``lr_brdf``        (N, 3, h, w)                 low-resolution BRDF factor
-``lr_guide``       (N, 7, h, w)                 the G-buffer the LR colour was shaded with: albedo 3, depth 1,
-                                                normal 3 (a native LR folder's own, else the HR one point-sampled
-                                                at the LR pixels: ``wdss.data.preprocess.lr_guide``)
-``lr_jitter``      (N, 2)                       where the LR pixels were shaded, from their centres: x right, y down,
-                                                LR pixels (a jittered native LR frame's ``lr_jitter``, negated
-                                                along a mirrored axis; else 0)
-``gbuffer``        (N, 11, H, W)                base colour 3, depth 1, normal 3, specular, roughness, NoV,
-                                                metallic (``wdss.data.dataset.GBUFFER_STACK``)
-``spatial_mask``   (N, 1, H, W)                 1 where HR and upsampled LR G-buffers disagree
-``history``        (N, 3, H, W)                 previous HR frame (irradiance), warped by the motion vectors
-``temporal_mask``  (N, 5, H, W)                 |d depth|, |d albedo| (3), (1 - n.n')/2 against the warped previous
-``motion``         (N, 2, H, W)                 motion vectors, HR pixels, current - previous, y up
-``lr_gbuffer``     (N, 4, h, w)                 low-resolution depth and normal (NSRR, FuseSR)
-``prev_lr_color``  (N, 3, h, w)                 the previous frame's low-resolution colour (NSRR)
-``prev_lr_gbuffer`` (N, 4, h, w)                the previous frame's low-resolution depth and normal (NSRR)
-``history2``       (N, 3, H, W)                 frame t-2 (irradiance) warped to t through t-1 (FuseSR)
-``emission``       (N, 3, H, W)                 high-resolution emitted radiance, added to the remodulated
-                                                prediction (only where ``preprocessing.emission`` separates it;
-                                                0 for a sequence without the buffer)
-``scale``          (N,)                         the nominal scale s of the batch (h = round(H / s))
-``sequence``       list[str], ``frame`` (N,)    where each sample comes from
-=================  ===========================  ================================================================
+Batches are dicts of named tensors: :mod:`wdss.data.batch` defines every key (shape, dtype, space, meaning); only
+those the model asks for are built, and only the files they need are opened. The first batch of each loader is held
+to that definition (:func:`wdss.data.batch.check_batch`); later ones are not checked.
 
 With ``sequence_length = T > 1`` a training batch is ``{"steps": [batch_1, ..., batch_T]}``: T consecutive
 frames, the same patch and mirroring in each, one scale; validation and test batches stay single frames, in
@@ -61,11 +31,14 @@ import lightning as L
 import torch
 from torch.utils.data import DataLoader
 
+from wdss.data.batch import check_batch
+from wdss.data.buffers import OPTIONAL_BUFFERS
 from wdss.data.cache import FrameCache
 from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing, ScaleSpec, parse_scale, requirements
-from wdss.data.layouts import OPTIONAL_BUFFERS, SceneError, Sequence, discover_sequences
+from wdss.data.layouts import SceneError, discover_sequences
 from wdss.data.packed import PackedSequence, discover_packed, is_packed
 from wdss.data.preprocess import RawBatch
+from wdss.data.source import FrameSource
 from wdss.errors import ConfigError
 
 __all__ = ["SceneDataModule"]
@@ -196,6 +169,7 @@ class SceneDataModule(L.LightningDataModule):
         # EXR sequences share one budget per process (each loader worker holds its own cache).
         self.cache = FrameCache(cache_mb * 2**20) if cache_mb else None
         self.datasets: dict[str, Any] = {}
+        self._checked: set[tuple[Any, int]] = set()  # (trainer stage, dataloader) whose first batch was checked
 
     @staticmethod
     def _middle(scale: ScaleSpec) -> float:
@@ -299,7 +273,7 @@ class SceneDataModule(L.LightningDataModule):
                 ceilings[name] = (float(noise["ceiling_psnr_db"]), len(noise.get("frames") or [1]))
         return ceilings
 
-    def _sequences(self, split: str, keys: Iterable[str]) -> tuple[list, dict[str, tuple[int, int]]]:
+    def _sequences(self, split: str, keys: Iterable[str]) -> tuple[list[FrameSource], dict[str, tuple[int, int]]]:
         if split not in self.splits:
             raise SceneError(f"data.splits has no {split!r} split")
         names, ranges = self.splits[split]
@@ -322,14 +296,13 @@ class SceneDataModule(L.LightningDataModule):
         need = set().union(*requirements(keys, self.prep).values())
         return self._cached([self._auto(name, need) for name in names]), ranges
 
-    def _cached(self, sequences: list) -> list:
-        """EXR sequences keep their decoded frames in the data module's cache (packed ones read patches)."""
+    def _cached(self, sequences: list[FrameSource]) -> list[FrameSource]:
+        """Sequences keep their decoded frames in the data module's cache (EXR ones do; packed ones read patches)."""
         for seq in sequences:
-            if isinstance(seq, Sequence):
-                seq.cache = self.cache
+            seq.use_cache(self.cache)
         return sequences
 
-    def _auto(self, name: str, need: set[str]) -> Sequence | PackedSequence:
+    def _auto(self, name: str, need: set[str]) -> FrameSource:
         """The packed copy of a sequence where it is complete, up to date and holds ``need``; else its EXR files."""
         folder = self.packed_root / name
         if is_packed(folder):
@@ -411,11 +384,17 @@ class SceneDataModule(L.LightningDataModule):
         return trainer is not None and trainer.strategy.root_device.type != "cpu"
 
     def on_after_batch_transfer(self, batch: Any, dataloader_idx: int) -> Any:
-        """Build a raw batch on the device it was moved to (``preprocess_on: device``); other batches pass."""
+        """Build a raw batch on the device it was moved to (``preprocess_on: device``); other batches pass. The
+        first batch of each loader is checked against :mod:`wdss.data.batch` (once: no cost per step)."""
         if isinstance(batch, RawBatch):
-            return batch.build()
-        if isinstance(batch, dict) and "steps" in batch and any(isinstance(s, RawBatch) for s in batch["steps"]):
-            return {**batch, "steps": [s.build() if isinstance(s, RawBatch) else s for s in batch["steps"]]}
+            batch = batch.build()
+        elif isinstance(batch, dict) and "steps" in batch and any(isinstance(s, RawBatch) for s in batch["steps"]):
+            batch = {**batch, "steps": [s.build() if isinstance(s, RawBatch) else s for s in batch["steps"]]}
+        trainer = self.trainer
+        loader = (trainer.state.stage if trainer is not None else None, dataloader_idx)
+        if loader not in self._checked and isinstance(batch, dict):
+            self._checked.add(loader)
+            check_batch(batch, self.test_inputs if trainer is not None and trainer.testing else self.inputs)
         return batch
 
     def train_dataloader(self) -> DataLoader:

@@ -7,7 +7,8 @@ decoded whole and cut. Previous frames are cut with the margin their warp needs 
 the patch). It mirrors the patch and records each frame's depth range. :class:`Collate` stacks the samples into
 a :class:`~wdss.data.preprocess.RawBatch` and, unless the preprocessing runs on the device, builds the batch
 in the loader's worker (:mod:`wdss.data.preprocess`: scale, point sampling, BRDF, demodulation, warps, masks).
-The batch keys are documented in :mod:`wdss.data.datamodule`.
+The batch keys are defined in :mod:`wdss.data.batch`; a sequence is read through
+:class:`~wdss.data.source.FrameSource`, EXR files and packed stores alike.
 """
 
 from __future__ import annotations
@@ -23,8 +24,11 @@ import torch.nn.functional as F
 from torch import Tensor
 from torch.utils.data import Dataset, Sampler
 
-from wdss.data.layouts import BUFFERS, SceneError, Sequence
-from wdss.data.preprocess import GBUFFER_STACK, LR_GUIDE, Preprocessing, RawBatch, brdf_of, build_batch
+from wdss.data.batch import BATCH_KEYS, GBUFFER_STACK, KEYS, LR_GEOMETRY, LR_GUIDE
+from wdss.data.buffers import BUFFERS
+from wdss.data.layouts import SceneError
+from wdss.data.preprocess import Preprocessing, RawBatch, brdf_of, build_batch
+from wdss.data.source import FrameSource
 from wdss.ops.sampling import flip, flip_jitter, lr_size, scale_matches
 
 __all__ = [
@@ -44,25 +48,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-BATCH_KEYS = (
-    "target",
-    "brdf",
-    "lr",
-    "lr_color",
-    "lr_brdf",
-    "lr_guide",
-    "lr_jitter",
-    "gbuffer",
-    "spatial_mask",
-    "history",
-    "temporal_mask",
-    "motion",
-    "lr_gbuffer",
-    "prev_lr_color",
-    "prev_lr_gbuffer",
-    "history2",
-    "emission",
-)
 _MASK_BUFFERS = {"depth", "normal", "base_color"}
 _WARPED = {"history", "temporal_mask", "history2"}  # keys that warp previous frames by the motion vectors
 ROLES = ("hr", "lr", "prev", "prev_lr", "prev2")
@@ -105,7 +90,7 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
     """Buffers per role for ``keys``: ``hr`` (current frame), ``lr`` (current, low resolution), ``prev`` (previous
     frame), ``prev_lr`` (previous, low resolution), ``prev2`` (the frame before the previous one)."""
     keys = set(keys)
-    unknown = keys - set(BATCH_KEYS) - {"scale"}
+    unknown = keys - set(KEYS)
     if unknown:
         raise ValueError(f"unknown batch keys {sorted(unknown)}: expected some of {', '.join(BATCH_KEYS)}")
     need: dict[str, set[str]] = {role: set() for role in ROLES}
@@ -140,11 +125,11 @@ def requirements(keys: Iterable[str], prep: Preprocessing) -> dict[str, set[str]
     if "motion" in keys:
         need["hr"] |= {"motion"}
     if "lr_gbuffer" in keys:
-        need["lr"] |= {"depth", "normal"}
+        need["lr"] |= set(LR_GEOMETRY)
     if "prev_lr_color" in keys:
         need["prev_lr"] |= {"color"}
     if "prev_lr_gbuffer" in keys:
-        need["prev_lr"] |= {"depth", "normal"}
+        need["prev_lr"] |= set(LR_GEOMETRY)
     if "history2" in keys:
         need["prev2"] |= {"color"} | (brdf | emitted if prep.demodulate else set())
         need["prev"] |= {"motion"}
@@ -171,7 +156,7 @@ class FrameDataset(Dataset):
 
     def __init__(
         self,
-        sequences: Seq[Sequence],
+        sequences: Seq[FrameSource],
         keys: Iterable[str],
         *,
         scale: float | tuple[float, float] = 2.0,
@@ -255,7 +240,7 @@ class FrameDataset(Dataset):
             log.info("sequence %r has no emission buffer: its colour is demodulated whole (as if nothing emits)", name)
         return missing
 
-    def native_lr(self, seq: Sequence, scale: float | None = None) -> int | None:
+    def native_lr(self, seq: FrameSource, scale: float | None = None) -> int | None:
         """The native low-resolution folder read at ``scale`` (default: the fixed scale), if any: the one choice of
         where the LR frame and its G-buffer (:func:`wdss.data.preprocess.lr_guide`) come from (``lr_source``)."""
         scale = self.scale if scale is None else scale  # a range or set: the batch's scale is not known here
@@ -272,7 +257,7 @@ class FrameDataset(Dataset):
             )
         return None
 
-    def _frame(self, seq: Sequence, frame: int, lr_height: int | None, window: tuple | None) -> dict:
+    def _frame(self, seq: FrameSource, frame: int, lr_height: int | None, window: tuple | None) -> dict:
         """The raw buffers of one frame in each role, cut to the window (zeros for history before the first frame),
         each high-resolution frame's depth range, and the margins of the previous frames' windows."""
         need, prep = self.need, self.prep
@@ -337,7 +322,7 @@ class FrameDataset(Dataset):
                 out["ranges"][role] = found
         return out
 
-    def _check_native_lr(self, seq: Sequence, frame: int, lr_height: int, scale: float) -> None:
+    def _check_native_lr(self, seq: FrameSource, frame: int, lr_height: int, scale: float) -> None:
         hr_shape, lr_shape = seq.shape(seq.hr), seq.shape(lr_height)
         expected = lr_size(*hr_shape, scale)
         if tuple(lr_shape) != expected:
@@ -377,7 +362,7 @@ class FrameDataset(Dataset):
             step["scale"] = scale if isinstance(scale, float) else None  # None: Collate draws it, after the read
         return steps[0] if self.sequence_length == 1 else {"steps": steps}
 
-    def _window(self, seq: Sequence, native_scale: float | None, rng: torch.Generator | None) -> tuple | None:
+    def _window(self, seq: FrameSource, native_scale: float | None, rng: torch.Generator | None) -> tuple | None:
         """A random patch position shared by every step of a sample: HR ``(y, x, h, w)`` and LR likewise."""
         if self.patch is None:
             return None

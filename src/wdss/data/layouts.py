@@ -12,10 +12,8 @@ convention inside it. Two are known, and a renderer that writes one of them need
   ``PreTonemapHDRColor``, ``BaseColor``, ``WorldNormalAndSceneDepth``, ``MotionVectorAndMetallicAndRoughness``,
   ``NoV``, ``Specular``.
 
-Buffers (channels): ``color`` 3 (linear HDR radiance), ``base_color`` 3, ``depth`` 1, ``normal`` 3 (world
-space), ``specular`` 1, ``metallic`` 1, ``roughness`` 1, ``nov`` 1, ``motion`` 2 (high-resolution pixels,
-current minus previous screen position, y up), ``emission`` 3 (optional: the emitted radiance of directly visible
-surfaces, part of ``color``; ``Emissive.NNNN.exr`` in either layout, written by wdss's renderer).
+The buffers and their channels are :data:`wdss.data.buffers.BUFFERS`; the optional ``emission`` is
+``Emissive.NNNN.exr`` in either layout, written by wdss's renderer.
 
 Reading opens only the files that hold a requested buffer, each at most once per call, and returns only the
 requested channels; a requested buffer that is missing is an error naming sequence, frame, file and channel.
@@ -37,6 +35,7 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
+from wdss.data.buffers import BUFFERS, OPTIONAL_BUFFERS
 from wdss.data.cache import FrameCache
 from wdss.data.exr import read_exr, read_exr_size
 from wdss.data.preprocess import SANITIZE_ELSEWHERE
@@ -60,21 +59,6 @@ __all__ = [
 # Frames per second of a sequence whose sequence.json does not say (wdss's renderer steps per frame, not per
 # second): the floor of real-time rendering, for videos.
 DEFAULT_FRAME_RATE = 30.0
-
-BUFFERS: dict[str, int] = {
-    "color": 3,
-    "base_color": 3,
-    "depth": 1,
-    "normal": 3,
-    "specular": 1,
-    "metallic": 1,
-    "roughness": 1,
-    "nov": 1,
-    "motion": 2,
-    "emission": 3,
-}
-# Buffers a sequence may lack (the authors' and DFASR's captures have no emission): read as absent, not an error.
-OPTIONAL_BUFFERS = ("emission",)
 
 log = logging.getLogger(__name__)
 
@@ -337,7 +321,8 @@ class SidecarFacts:
 
 
 class Sequence(SidecarFacts):
-    """One sequence of frames in a known layout; :meth:`read` loads named buffers of one frame."""
+    """One sequence of frames in a known layout; :meth:`read` loads named buffers of one frame (a
+    :class:`wdss.data.source.FrameSource`)."""
 
     def __init__(self, path: str | Path, layout: str = "auto") -> None:
         self.source = Source(path)
@@ -384,6 +369,14 @@ class Sequence(SidecarFacts):
     def frames_at(self, height: int) -> list[int]:
         """The frames that have files at ``height``."""
         return self.layout.frames(self._index, height)
+
+    def stale(self) -> str | None:
+        """None: the EXR files are the source, never out of date with themselves."""
+        return None
+
+    def use_cache(self, cache: FrameCache | None) -> None:
+        """Keep decoded frames in ``cache`` (None: none): a patch is cut from a whole decoded frame."""
+        self.cache = cache
 
     def file(self, buffer: str, height: int, frame: int) -> str | None:
         """The file (relative to the sequence) holding ``buffer`` of ``frame`` at ``height``, or None."""

@@ -20,7 +20,7 @@ A packed store holds one folder per sequence, ``<store>/<sequence>/``:
 * ``sequence.json``: the source's sidecar, copied (camera rotations for flips, frame rate, exposure).
 
 :class:`PackedSequence` reads a window of a frame by decoding only the tiles it overlaps, straight from the
-memory map; it offers the reading interface of :class:`wdss.data.layouts.Sequence`.
+memory map; it is a :class:`wdss.data.source.FrameSource`, as :class:`wdss.data.layouts.Sequence` is.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wdss.data.cache import FrameCache
 from wdss.data.layouts import BUFFERS, SceneError, Sidecar, SidecarFacts, parse_sidecar
 from wdss.data.preprocess import SANITIZE_ELSEWHERE, depth_range
 
@@ -159,7 +160,11 @@ class PackedSequence(SidecarFacts):
         state["_maps"], state["_decompressor"] = {}, None
         return state
 
-    # ---- the interface of wdss.data.layouts.Sequence ----------------------------------------------------
+    # ---- the interface of wdss.data.source.FrameSource ---------------------------------------------------
+
+    def frames_at(self, height: int) -> list[int]:
+        """The frames packed at ``height``."""
+        return sorted(int(f) for f in self._res.get(height, {}).get("packed", {}))
 
     def has(self, buffer: str, height: int, frame: int | None = None) -> bool:
         res = self._res.get(height)
@@ -346,6 +351,9 @@ class PackedSequence(SidecarFacts):
                 recorded = depth_range(np.nan_to_num(plane.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0), far)
             self._ranges[key] = (float(recorded[0]), float(recorded[1]))
         return self._ranges[key]
+
+    def use_cache(self, cache: FrameCache | None) -> None:
+        """Nothing to keep: a window decodes only its own tiles, straight from the memory map."""
 
     def stale(self) -> str | None:
         """Why the packed frames may no longer be the source's, or None (None too when the source is gone)."""

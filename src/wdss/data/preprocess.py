@@ -22,6 +22,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from wdss.data.batch import GBUFFER_STACK, LR_GEOMETRY, LR_GUIDE
 from wdss.ops.brdf import BRDF_KNEE, demodulate, extranet_brdf, safe_brdf, split_sum_brdf
 from wdss.ops.sampling import lr_size, point_sample
 from wdss.ops.warp import normalize_normals, spatial_mask, temporal_mask, warp_backward
@@ -40,13 +41,6 @@ __all__ = [
     "prediction_color",
     "target_irradiance",
 ]
-
-# The high-resolution G-buffer stack of the network, in channel order (11 channels).
-GBUFFER_STACK = ("base_color", "depth", "normal", "specular", "roughness", "nov", "metallic")
-# The guide of every LR-side comparison (joint bilateral taps, the learned kernel): the first 7 channels of the
-# stack, albedo 3, depth 1, normal 3, as the LR frame saw them (see :func:`lr_guide`).
-LR_GUIDE = GBUFFER_STACK[:3]
-
 
 # The same switch where the command is not training: upscale and export take overrides of the training's preprocessing.
 SANITIZE_ELSEWHERE = "wdss.upscale and wdss.export: +preprocessing.sanitize=true"
@@ -161,7 +155,7 @@ class RawBatch:
         return len(self.sequence)
 
     def build(self) -> dict:
-        """The named batch tensors (keys documented in :mod:`wdss.data.datamodule`), on the raw batch's device."""
+        """The named batch tensors (:mod:`wdss.data.batch`), on the raw batch's device."""
         prep = self.prep
         roles = {
             role: clean({k: v.float() for k, v in buffers.items()}, prep, self.ranges.get(role))
@@ -292,11 +286,11 @@ def build_batch(
     if "motion" in keys:
         batch["motion"] = hr["motion"]
     if "lr_gbuffer" in keys:
-        batch["lr_gbuffer"] = torch.cat([lr["depth"], lr["normal"]], dim=1)
+        batch["lr_gbuffer"] = torch.cat([lr[name] for name in LR_GEOMETRY], dim=1)
     if "prev_lr_color" in keys:
         batch["prev_lr_color"] = prev_lr["color"]
     if "prev_lr_gbuffer" in keys:
-        batch["prev_lr_gbuffer"] = torch.cat([prev_lr["depth"], prev_lr["normal"]], dim=1)
+        batch["prev_lr_gbuffer"] = torch.cat([prev_lr[name] for name in LR_GEOMETRY], dim=1)
     if "history2" in keys:  # frame t-2 warped to t-1 (on t-1's window), then to t
         prev2 = roles["prev2"]
         older = irradiance_of(prev2, prep)

@@ -3,7 +3,7 @@ declares instead of probing it for attributes it may not have.
 
 A network (:class:`SuperResolutionNet`) declares:
 
-- ``inputs``: the batch keys its ``forward`` reads (:mod:`wdss.data.datamodule` documents them); the reader loads
+- ``inputs``: the batch keys its ``forward`` reads (:mod:`wdss.data.batch` defines them); the reader loads
   those and nothing else, and names a missing one.
 - ``forward(**batch)``: a dict with ``irradiance`` (N, 3, H, W, linear, demodulated: the module remodulates it with
   ``brdf``) or, for a network that works on tone-mapped colour, ``display`` (N, 3, H, W in [0, 1]) and

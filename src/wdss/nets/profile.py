@@ -18,6 +18,7 @@ import torch
 from torch import nn
 from torch.utils.flop_counter import FlopCounterMode
 
+from wdss.data.batch import KEYS
 from wdss.ops.sampling import lr_size
 
 __all__ = ["PROCESS", "device_name", "dummy_inputs", "flops", "forward_ms"]
@@ -42,20 +43,15 @@ def device_name(device: str | torch.device) -> str:
 
 
 def dummy_inputs(net: nn.Module, height: int, width: int, scale: float, device: str = "cpu") -> dict:
-    """Random inputs for every argument of ``net.forward`` at an ``height x width`` output and ``scale``."""
-    h, w = lr_size(height, width, scale)
-    shapes = {
-        "lr": (3, h, w), "lr_color": (3, h, w), "lr_gbuffer": (4, h, w), "prev_lr_color": (3, h, w),
-        "prev_lr_gbuffer": (4, h, w), "gbuffer": (11, height, width), "spatial_mask": (1, height, width),
-        "history": (3, height, width), "history2": (3, height, width), "temporal_mask": (5, height, width),
-        "brdf": (3, height, width), "lr_brdf": (3, h, w), "lr_guide": (7, h, w), "motion": (2, height, width),
-    }  # fmt: skip
+    """Random inputs for every image argument of ``net.forward`` (shapes of :mod:`wdss.data.batch`) at an
+    ``height x width`` output and ``scale``."""
+    grids = {"hr": (height, width), "lr": lr_size(height, width, scale)}
     inputs = {}
     for name in inspect.signature(net.forward).parameters:
         if name == "scale":
             inputs["scale"] = torch.full((1,), float(scale), device=device)
-        elif name in shapes:
-            inputs[name] = torch.rand(1, *shapes[name], device=device)
+        elif name in KEYS and KEYS[name].grid in grids:  # the image keys (lr_jitter is left to its default)
+            inputs[name] = torch.rand(1, KEYS[name].channels, *grids[KEYS[name].grid], device=device)
     return inputs
 
 

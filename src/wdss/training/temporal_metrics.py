@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import torch
 from torch import Tensor
 
-from wdss.data.dataset import GBUFFER_STACK
+from wdss.data.batch import GBUFFER_STACK
 from wdss.data.layouts import BUFFERS
 from wdss.ops.warp import temporal_mask, warp_backward
 from wdss.training.metrics import psnr
