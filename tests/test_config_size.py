@@ -55,7 +55,8 @@ def test_the_two_sizes_differ_for_every_learned_model():
 def test_what_benchmarks_build_outside_a_run_is_read_from_the_size_and_model_configs():
     """One source for widths and DFASR's settings: wdss.config.sizes reads conf/size and conf/model, which runs
     compose; the benchmarks keep no copy."""
-    from wdss.bench import dfasr_settings, inference_settings
+    from wdss.bench.inference import inference_settings
+    from wdss.bench.model import dfasr_settings
     from wdss.config.sizes import model_net_settings, size_widths
 
     for size in ("small", "paper"):

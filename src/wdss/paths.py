@@ -11,6 +11,7 @@ from omegaconf import OmegaConf
 
 PROJECT_ROOT = Path(os.environ.get("WDSS_ROOT", Path(__file__).resolve().parents[2]))
 CONF_DIR = PROJECT_ROOT / "conf"
+SWEEPS_DIR = PROJECT_ROOT / "sweeps"  # a file per paper table or figure, its report facts as data
 
 # conf/hydra/default.yaml names run folders by the second they start and this random suffix: two runs started
 # in the same second (parallel shells, job arrays) would otherwise share a folder and overwrite each other's

@@ -207,7 +207,7 @@ def test_a_native_render_records_its_convention_and_its_own_lr_gbuffer_guides_jo
 
 
 def test_bench_noise_re_renders_the_targets_exactly_with_their_seed_and_measures_noise_with_another(rendered):
-    from wdss.bench import bench_noise
+    from wdss.bench.render import bench_noise
 
     folder, _ = rendered
 
@@ -223,7 +223,7 @@ def test_bench_noise_re_renders_the_targets_exactly_with_their_seed_and_measures
 
 
 def test_a_render_with_noise_ceiling_records_what_bench_noise_measures_and_keeps_it_on_resume(tmp_path):
-    from wdss.bench import bench_noise
+    from wdss.bench.render import bench_noise
 
     kwargs = dict(frames=1, resolution=SIZE, scales=(2,), samples=2, denoise=False, spec=controlled_scene())
     folder = render_sequence(tmp_path, "seq", 7, noise_ceiling=True, **kwargs)
