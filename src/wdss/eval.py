@@ -19,6 +19,7 @@ import lightning as L
 import numpy as np
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from wdss.callbacks import mlflow_callbacks
 from wdss.callbacks.progress_bar import progress_callbacks
 from wdss.checkpoint import read_checkpoint, training_preprocessing
 from wdss.config.targets import check_targets, instantiate
@@ -168,7 +169,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     datamodule = instantiate(cfg.data, inputs=list(module.inputs), test_inputs=list(module.test_inputs))
     datamodule.check(["test"])  # a missing data root or sequence: refused before any run starts
     logger = _eval_logger(cfg, ckpt)
-    callbacks = progress_callbacks()
+    callbacks = progress_callbacks() + mlflow_callbacks()
     if cfg.get("write_outputs"):
         callbacks.append(WritePredictions(Path(str(cfg.paths.output_dir)) / "frames"))
     if cfg.get("video"):

@@ -25,6 +25,7 @@ from hydra.types import RunMode
 from lightning.pytorch.utilities.exceptions import SIGTERMException
 from omegaconf import DictConfig, OmegaConf
 
+from wdss.callbacks import mlflow_callbacks
 from wdss.callbacks.progress_bar import model_line, progress_callbacks
 from wdss.checkpoint import CheckpointError, read_checkpoint
 from wdss.config.targets import TargetRefused, check_targets, instantiate
@@ -309,9 +310,11 @@ def _model_and_data(cfg: DictConfig) -> tuple[Any, Any, bool]:
 
 
 def _trainer(cfg: DictConfig, module: Any, output_dir: Path) -> L.Trainer:
-    """The Trainer with the config's callbacks, progress and (with video) the test videos."""
+    """The Trainer with the config's callbacks, progress, what is logged to MLflow beside the metrics (panels, test
+    frames, per-frame histories) and (with video) the test videos."""
     multirun = HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
     callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + progress_callbacks(multirun=multirun)
+    callbacks += mlflow_callbacks()
     if cfg.get("video") and cfg.get("test"):
         from wdss.video import SequenceVideos
 

@@ -44,6 +44,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 from torch import Tensor
 
+from wdss.callbacks.images import comparison_panel
 from wdss.checkpoint import CheckpointError, read_checkpoint, training_preprocessing
 from wdss.config.targets import TargetRefused, refuse_interpolation
 from wdss.data.dataset import Collate, FrameDataset, Preprocessing, ScaleSpec, parse_scale
@@ -54,7 +55,7 @@ from wdss.nets.blocks import fold_rir_blocks
 from wdss.nets.upsamplers.baselines import Upsample
 from wdss.paths import CONF_DIR
 from wdss.progress import Progress
-from wdss.training.module import SuperResolutionModule, comparison_panel
+from wdss.training.module import SuperResolutionModule
 from wdss.video import LABELS, Mp4Writer, labelled
 
 __all__ = ["UpscaleError", "main", "output_name", "upscale"]
@@ -360,7 +361,7 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
 
 def _comparison(module: SuperResolutionModule, base: Tensor, color: Tensor, target: Tensor | None) -> np.ndarray:
     """The labelled ``compare/<frame>.png``: baseline | prediction, and with a target | target | error x4 as the
-    eval videos show them (:func:`wdss.training.module.comparison_panel`, the baseline in the LR tile's place: at HR
+    eval videos show them (:func:`wdss.callbacks.images.comparison_panel`, the baseline in the LR tile's place: at HR
     already, its nearest upsampling leaves it as it is)."""
     if target is None:
         tiles = [module.tone(x.float(), color.float()) for x in (base, color)]

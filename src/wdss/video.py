@@ -2,7 +2,7 @@
 
 :class:`SequenceVideos` (``video=true`` of ``wdss.eval`` and ``wdss.train``) writes, per test sequence and scale,
 ``<sequence>_<s>x.mp4``: LR (nearest-upsampled) | prediction | target | error x4, tone-mapped as the metrics see
-them (:func:`wdss.training.module.comparison_panel`), labelled, at the sequence's frame rate, H.264 through PyAV
+them (:func:`wdss.callbacks.images.comparison_panel`), labelled, at the sequence's frame rate, H.264 through PyAV
 (which ships its own FFmpeg); and ``<sequence>_<s>x_crop.gif``: the same four tiles cropped to the centre
 square that the report's qualitative figure shows, enlarged, which the MLflow UI shows inline. Both are logged as
 artifacts of the run under ``videos/``.
@@ -24,6 +24,7 @@ import numpy as np
 from torch import Tensor
 
 from wdss.data.layouts import DEFAULT_FRAME_RATE
+from wdss.tracking.logged_run import logged_run
 
 __all__ = [
     "CROP",
@@ -150,7 +151,7 @@ class SequenceVideos(L.Callback):
     def on_test_batch_end(
         self, trainer: L.Trainer, pl_module: Any, outputs: Any, batch: Any, batch_idx: int, dataloader_idx: int = 0
     ) -> None:
-        from wdss.training.module import comparison_panel
+        from wdss.callbacks.images import comparison_panel  # imported here: that module imports this one
 
         if not outputs or "shown" not in outputs:
             return
@@ -158,7 +159,7 @@ class SequenceVideos(L.Callback):
         for index, sequence in enumerate(batch["sequence"]):
             key = f"{sequence}_{label}"
             if key != self._key:
-                self._finish(pl_module)
+                self._finish(trainer)
                 self._start(key, self._frame_rate(trainer, dataloader_idx, sequence))
             sample = {k: v[index : index + 1] for k, v in batch.items() if isinstance(v, Tensor) and v.ndim == 4}
             panel = comparison_panel(sample, {"display": outputs["shown"][index : index + 1]}, pl_module.tone)
@@ -166,7 +167,7 @@ class SequenceVideos(L.Callback):
             self._crops.append(self._crop(panel))
 
     def on_test_epoch_end(self, trainer: L.Trainer, pl_module: Any) -> None:
-        self._finish(pl_module)
+        self._finish(trainer)
 
     def on_exception(self, trainer: L.Trainer, pl_module: Any, exception: BaseException) -> None:
         if self._writer is not None:  # close the file; a partial video is not logged
@@ -195,15 +196,14 @@ class SequenceVideos(L.Callback):
         crops = np.concatenate(tiles, axis=1).repeat(self.enlarge, axis=0).repeat(self.enlarge, axis=1)
         return labelled(crops)
 
-    def _finish(self, pl_module: Any) -> None:
+    def _finish(self, trainer: L.Trainer) -> None:
         if self._writer is None:
             return
         self._writer.close()
         gif = self.out_dir / f"{self._key}_crop.gif"
         write_gif(self._crops, gif, self._fps)
-        experiment = getattr(pl_module.logger, "experiment", None)
-        run_id = getattr(pl_module.logger, "run_id", None)
-        if experiment is not None and run_id is not None and hasattr(experiment, "log_artifact"):
+        run = logged_run(trainer)
+        if run is not None:
             for path in (self._writer.path, gif):
-                experiment.log_artifact(run_id, str(path), "videos")
+                run.client.log_artifact(run.run_id, str(path), "videos")
         self._writer, self._key, self._crops = None, None, []

@@ -268,34 +268,3 @@ def test_flip_is_a_test_metric_and_in_validation_only_when_asked(in_validation):
         model._evaluate(data, "test", "_2x")
     assert {"test/flip_2x", "test/flip_hdr_2x", "test/psnr_2x"} <= set(logged)
     assert ("val/flip" in logged) == ("val/flip_hdr" in logged) == in_validation and "val/psnr" in logged
-
-
-def test_validation_images_are_captioned_with_what_each_tile_shows(monkeypatch):
-    """The validation panels logged to MLflow carry the eval videos' captions above the tiles: LR | prediction |
-    target | error x4, and the subbands' names with how each is scaled; the pixels below stay the panel's."""
-    from types import SimpleNamespace
-
-    from wdss.training.module import comparison_panel, subband_panel
-
-    logged = {}
-
-    class Store:
-        def log_image(self, run_id, image, artifact_file):
-            logged[artifact_file.split("_")[0]] = np.asarray(image)
-
-    monkeypatch.setattr(
-        SuperResolutionModule, "logger", property(lambda self: SimpleNamespace(experiment=Store(), run_id="0" * 32))
-    )
-    model = module()
-    data = batch()
-    with torch.no_grad():
-        out = model(data)
-    model._log_images(data, out)
-    panel, subbands = comparison_panel(data, out, model.tone), subband_panel(out["coefficients"][0])
-    for name, plain in (("images/val", panel), ("images/subbands", subbands)):
-        image = logged[name]
-        plain = plain if plain.ndim == 3 else np.repeat(plain[..., None], 3, -1)  # the subbands are grey
-        strip = image.shape[0] - plain.shape[0]
-        assert strip > 0 and image.shape[1:] == plain.shape[1:]
-        np.testing.assert_array_equal(image[strip:], plain)
-        assert image[:strip].any(), f"{name}: the caption strip is blank"

@@ -1,8 +1,13 @@
-"""The LightningModule: a network (or baseline) -> remodulation -> loss, metrics per scale, logged images.
+"""The LightningModule: a network (or baseline) -> remodulation -> loss, metrics per scale.
 
 The module is built from plain config mappings (``_target_`` dicts) for the network, optimiser and
 scheduler, and stores them as hyper-parameters, so a checkpoint alone rebuilds the model:
 ``SuperResolutionModule.load_from_checkpoint(path, weights_only=True)``.
+
+The module logs its scalar metrics through Lightning (``self.log``) and knows nothing of MLflow: what it shows
+beyond them (validation panels, test frames, per-frame metric histories, videos) it hands to callbacks
+(:mod:`wdss.callbacks`) as the outputs of :meth:`~SuperResolutionModule.validation_step` and
+:meth:`~SuperResolutionModule.test_step` and as :attr:`~SuperResolutionModule.temporal_stability`.
 """
 
 from __future__ import annotations
@@ -42,6 +47,11 @@ class SuperResolutionModule(L.LightningModule):
     ``temporal``: ``gt_history``, ``recurrent`` or ``none`` (default: whatever the network's branch implies).
     ``flip``: FLIP (LDR and HDR) among the test metrics; ``flip_in_validation``: in validation too (off by default:
     FLIP is most of a CPU validation's time, and checkpoints are chosen by ``val/psnr``).
+    ``image_every_n_epochs``: how often the validation panels are logged (0: never), read by
+    :class:`~wdss.callbacks.images.ValidationPanels`.
+
+    After a test, :attr:`temporal_stability` holds the :class:`~wdss.training.temporal_metrics.TemporalStability`
+    of each scale label (``2x``), pooled over the DDP ranks' frames.
     """
 
     def __init__(
@@ -105,8 +115,8 @@ class SuperResolutionModule(L.LightningModule):
         self.temporal = temporal
         self._check_temporal()
         self._state: tuple[str, int, Tensor] | None = None  # recurrent evaluation: the last output, by frame
-        self._stability: dict[str, TemporalStability] = {}  # test: temporal metrics by scale label
-        self._shown: dict[str, tuple[str, int]] = {}  # test: the first sequence of each scale, frames logged
+        self._stability: dict[str, TemporalStability] = {}  # test: this rank's temporal sums by scale label
+        self.temporal_stability: dict[str, TemporalStability] = {}  # after a test: every rank's, pooled
 
     def _check_temporal(self) -> None:
         if self.temporal not in ("gt_history", "recurrent", "none"):
@@ -276,20 +286,20 @@ class SuperResolutionModule(L.LightningModule):
             self.log("val/loss", self._loss(batch, out)["total"], batch_size=n, sync_dist=True)
         return out
 
-    def validation_step(self, batch: Mapping[str, Any], batch_idx: int) -> None:
-        out = self._evaluate(batch, "val", "")
-        if (
-            batch_idx == 0
-            and self.hparams.image_every_n_epochs
-            and (self.current_epoch % self.hparams.image_every_n_epochs == 0)
-        ):
-            self._log_images(batch, out)
+    def validation_step(self, batch: Mapping[str, Any], batch_idx: int) -> dict[str, Tensor | None]:
+        """Validation metrics; returns the outputs of :meth:`forward` (``color`` or ``display``, and the network's
+        ``coefficients``), which the validation panels draw (:class:`~wdss.callbacks.images.ValidationPanels`)."""
+        return self._evaluate(batch, "val", "")
 
     def on_test_epoch_start(self) -> None:
-        self._stability, self._shown = {}, {}
+        self._stability, self.temporal_stability = {}, {}
 
     def test_step(self, batch: Mapping[str, Any], batch_idx: int, dataloader_idx: int = 0) -> dict[str, Tensor]:
-        """Per-frame metrics; the temporal ones accumulate over each sequence, whose frames arrive in order."""
+        """Per-frame metrics; the temporal ones accumulate over each sequence, whose frames arrive in order.
+
+        Returns ``shown`` and ``shown_target``, the tone-mapped prediction and target ``(N, 3, H, W)`` in [0, 1] as
+        the metrics see them (test frames, videos), and ``color``, the linear prediction (written outputs), where
+        the model predicts one."""
         label = f"{float(batch['scale'][0]):g}x"
         out = self._evaluate(batch, "test", f"_{label}")  # MLflow forbids '@' in metric names
         target = batch["target"].float()
@@ -297,32 +307,24 @@ class SuperResolutionModule(L.LightningModule):
         shown = (display if display is not None else self.tone(out["color"].float(), target)).detach().float()
         shown_target = self.tone(target, target)
         stability = self._stability.setdefault(label, TemporalStability())
-        for index, sequence in enumerate(batch["sequence"]):
-            frame = int(batch["frame"][index])
-            if "motion" in batch and "gbuffer" in batch:
-                one = slice(index, index + 1)
+        if "motion" in batch and "gbuffer" in batch:
+            for index, sequence in enumerate(batch["sequence"]):
+                one, frame = slice(index, index + 1), int(batch["frame"][index])
                 stability.update(
                     sequence, frame, shown[one], shown_target[one], batch["motion"][one], batch["gbuffer"][one]
                 )
-            # The first three frames of every scale's first sequence, for the report's qualitative figure.
-            first, logged = self._shown.setdefault(label, (sequence, 0))
-            if sequence == first and logged < 3:
-                suffix = f"_t{logged}" if logged else ""
-                self._log_frame(shown[index : index + 1], f"test/pred_{label}{suffix}.png")
-                self._log_frame(shown_target[index : index + 1], f"test/target_{label}{suffix}.png")
-                self._shown[label] = (first, logged + 1)
-        result = {"shown": shown}  # the tone-mapped prediction, for videos
+        result = {"shown": shown, "shown_target": shown_target}
         if out.get("color") is not None:
             result["color"] = out["color"].detach()
         return result
 
     def on_test_epoch_end(self) -> None:
-        """Log the temporal metrics of every scale (means over sequences) and, per sequence, each frame's PSNR and
-        warping error as MLflow metric histories ``frames/<sequence>/psnr_<s>x`` with the frame index as step."""
-        for label, stability in self._pooled_stability().items():
+        """Log the temporal metrics of every scale (means over sequences); keep the pooled sums, whose per-frame
+        values :class:`~wdss.callbacks.frame_metrics.FrameMetrics` logs, in :attr:`temporal_stability`."""
+        self.temporal_stability = self._pooled_stability()
+        for label, stability in self.temporal_stability.items():
             for name, value in stability.compute().items():
                 self.log(f"test/{name}_{label}", value, add_dataloader_idx=False, sync_dist=True)
-            self._log_frame_metrics(label, stability)
 
     def _pooled_stability(self) -> dict[str, TemporalStability]:
         """Every rank's temporal sums pooled (under DDP each rank saw a block of the frames), the same on all ranks."""
@@ -337,55 +339,6 @@ class SuperResolutionModule(L.LightningModule):
             for label, sequences in share.items():
                 pooled.setdefault(label, TemporalStability()).add(sequences)
         return pooled
-
-    def _log_frame_metrics(self, label: str, stability: TemporalStability) -> None:
-        experiment, run_id = getattr(self.logger, "experiment", None), getattr(self.logger, "run_id", None)
-        if experiment is None or run_id is None or not hasattr(experiment, "log_batch"):
-            return
-        import math
-        import re
-        import time
-
-        from mlflow.entities import Metric
-
-        now = int(time.time() * 1000)
-        metrics = []
-        for sequence in stability.sequences:
-            key = re.sub(r"[^\w\-. ]", "_", sequence)  # the characters MLflow allows in metric names
-            for frame, psnr, twe, twe_target in stability.frames(sequence):
-                values = {"psnr": psnr, "twe": twe, "twe_target": twe_target}
-                metrics += [
-                    Metric(f"frames/{key}/{name}_{label}", value, now, frame)
-                    for name, value in values.items()
-                    if math.isfinite(value)
-                ]
-        for start in range(0, len(metrics), 1000):  # MLflow's limit per batch
-            experiment.log_batch(run_id, metrics=metrics[start : start + 1000])
-
-    def _log_frame(self, image: Tensor, artifact_file: str) -> None:
-        experiment, run_id = getattr(self.logger, "experiment", None), getattr(self.logger, "run_id", None)
-        if experiment is not None and run_id is not None and hasattr(experiment, "log_image"):
-            array = (image[0].permute(1, 2, 0).cpu().numpy() * 255).round().astype("uint8")
-            experiment.log_image(run_id, array, artifact_file=artifact_file)
-
-    # ------------------------------------------------------------------------------------------ images
-
-    def _log_images(self, batch: Mapping[str, Any], out: Mapping[str, Tensor | None]) -> None:
-        experiment = getattr(self.logger, "experiment", None)
-        run_id = getattr(self.logger, "run_id", None)
-        if experiment is None or run_id is None or not hasattr(experiment, "log_image"):
-            return
-        from wdss.video import labelled  # the eval videos' captions: one reading of every panel wdss writes
-
-        panel = labelled(comparison_panel(batch, out, self.tone))
-        experiment.log_image(run_id, panel, artifact_file=f"images/val_epoch{self.current_epoch:03d}.png")
-        coefficients = out.get("coefficients")
-        if coefficients is not None:
-            experiment.log_image(
-                run_id,
-                labelled(subband_panel(coefficients[0]), SUBBAND_LABELS),
-                artifact_file=f"images/subbands_epoch{self.current_epoch:03d}.png",
-            )
 
     # ------------------------------------------------------------------------------------------ optimisation
 
@@ -408,52 +361,3 @@ class SuperResolutionModule(L.LightningModule):
                 group.setdefault("initial_lr", group["lr"])
                 group["lr"] = group["initial_lr"] * scale
         super().optimizer_step(epoch, batch_idx, optimizer, optimizer_closure)
-
-
-def comparison_panel(batch: Mapping[str, Any], out: Mapping[str, Tensor | None], tone: ToneMap):
-    """LR (nearest-upsampled) | prediction | target | error x4, tone-mapped, as an (H, 4W, 3) uint8 array."""
-    import numpy as np
-
-    reference = batch["target"][:1].float()
-    target = tone(reference, reference)
-    shown = out.get("display")
-    pred = shown[:1].detach().float() if shown is not None else tone(out["color"][:1].detach().float(), reference)
-    lr_source = batch.get("lr_color")
-    if lr_source is None and "lr" in batch:
-        lr_brdf = torch.nn.functional.interpolate(batch["brdf"][:1], size=batch["lr"].shape[-2:], mode="nearest")
-        lr_source = batch["lr"][:1] * lr_brdf
-        if "emission" in batch:
-            lr_source = lr_source + torch.nn.functional.interpolate(
-                batch["emission"][:1], size=lr_source.shape[-2:], mode="nearest"
-            )
-    lr = (
-        torch.zeros_like(target)
-        if lr_source is None
-        else tone(
-            torch.nn.functional.interpolate(lr_source[:1].float(), size=target.shape[-2:], mode="nearest"), reference
-        )
-    )
-    error = ((pred - target).abs() * 4).clamp(0, 1)
-    row = torch.cat([lr, pred, target, error], dim=-1)[0]
-    return (row.permute(1, 2, 0).cpu().numpy() * 255).round().astype(np.uint8)
-
-
-SUBBAND_LABELS = ("LL (own range)", "LH", "HL", "HH (0.5 = zero)")
-
-
-def subband_panel(coefficients: Tensor):
-    """The four subbands of the first image, side by side, each scaled to its own range (uint8): LL from 0 to its
-    largest magnitude, the detail bands around grey 0.5 for zero (:data:`SUBBAND_LABELS`)."""
-    import numpy as np
-
-    bands = coefficients.detach().float().view(4, -1, *coefficients.shape[-2:])[:, :3]
-    tiles = []
-    for index, band in enumerate(bands):
-        band = band.mean(0)
-        if index == 0:
-            band = band / band.abs().max().clamp_min(1e-8)
-        else:
-            band = 0.5 + band / (2 * band.abs().max().clamp_min(1e-8))
-        tiles.append(band.clamp(0, 1))
-    image = torch.cat(tiles, dim=-1)
-    return (image.cpu().numpy() * 255).round().astype(np.uint8)
