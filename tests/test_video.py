@@ -3,8 +3,6 @@ loops over the crops."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import av
 import numpy as np
 from PIL import Image
@@ -55,27 +53,3 @@ def test_labels_sit_above_the_tiles_and_the_gif_loops_at_the_frame_rate(tmp_path
     write_gif([shown, 255 - shown, shown], tmp_path / "crop.gif", fps=10)
     gif = Image.open(tmp_path / "crop.gif")
     assert gif.n_frames == 3 and gif.size == (120, 34) and gif.info["duration"] == 100 and gif.info["loop"] == 0
-
-
-def test_the_videos_of_a_test_are_logged_to_the_trainers_mlflow_run_and_written_without_one(tmp_path, monkeypatch):
-    from types import SimpleNamespace
-
-    import torch
-
-    import wdss.video as video
-    from wdss.ops.tonemap import ToneMap
-    from wdss.tracking.logged_run import LoggedRun
-    from wdss.video import SequenceVideos
-
-    logged = []
-    client = SimpleNamespace(log_artifact=lambda run_id, path, folder: logged.append((run_id, Path(path).name, folder)))
-    trainer, module = SimpleNamespace(datamodule=None), SimpleNamespace(tone=ToneMap("hable"))
-    for run in (LoggedRun(client, "run"), None):
-        monkeypatch.setattr(video, "logged_run", lambda trainer, run=run: run)
-        videos = SequenceVideos(tmp_path / ("logged" if run else "unlogged"))
-        for first in (0, 2):
-            step = {"target": torch.rand(2, 3, 8, 12), "sequence": ["seq", "seq"], "scale": torch.full((2,), 2.0)}
-            videos.on_test_batch_end(trainer, module, {"shown": torch.rand(2, 3, 8, 12)}, step, first)
-        videos.on_test_epoch_end(trainer, module)
-        assert sorted(p.name for p in videos.out_dir.iterdir()) == ["seq_2x.mp4", "seq_2x_crop.gif"]
-    assert logged == [("run", "seq_2x.mp4", "videos"), ("run", "seq_2x_crop.gif", "videos")]

@@ -4,7 +4,7 @@ Rebuilds the model from the checkpoint alone (``weights_only=True``), tests it o
 scene at every scale of ``data.test_scales``, logs the metrics and the inference cost into an MLflow run of
 its own (nested under the run that trained it, found beside the checkpoint, when the tracking store has it),
 and optionally writes every prediction as linear EXR and tone-mapped PNG, and every test sequence as video
-(:mod:`wdss.video`).
+(:mod:`wdss.callbacks.videos`).
 """
 
 from __future__ import annotations
@@ -173,7 +173,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     if cfg.get("write_outputs"):
         callbacks.append(WritePredictions(Path(str(cfg.paths.output_dir)) / "frames"))
     if cfg.get("video"):
-        from wdss.video import SequenceVideos
+        from wdss.callbacks.videos import SequenceVideos
 
         callbacks.append(SequenceVideos(Path(str(cfg.paths.output_dir)) / "videos"))
     # The module's hyper-parameters are its training run's params; this run logs what the evaluation chose.

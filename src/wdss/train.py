@@ -316,7 +316,7 @@ def _trainer(cfg: DictConfig, module: Any, output_dir: Path) -> L.Trainer:
     callbacks = [instantiate(c) for c in (cfg.callbacks or {}).values()] + progress_callbacks(multirun=multirun)
     callbacks += mlflow_callbacks()
     if cfg.get("video") and cfg.get("test"):
-        from wdss.video import SequenceVideos
+        from wdss.callbacks.videos import SequenceVideos
 
         callbacks.append(SequenceVideos(output_dir / "videos"))
     # Under DDP this function runs once per rank (rank 0 starts the others: wdss.distributed). The Trainer knows
