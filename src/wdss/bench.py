@@ -23,8 +23,7 @@ from wdss.config.sizes import model_net_settings, size_widths
 from wdss.data.preprocess import prediction_color
 from wdss.memory import memory_retained, restart_with_retained_memory
 from wdss.nets.blocks import from_log, to_log
-from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
-from wdss.ops.sampling import upsample as upsample_lr
+from wdss.nets.upsamplers.baselines import Upsample
 
 BASES = ("haar", "db4", "sym4")
 TABLE_WIDTH = 160  # columns of a table printed off a terminal
@@ -297,11 +296,13 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     import inspect
 
     from wdss.nets.profile import dummy_inputs, flops
-    from wdss.nets.wdss.network import HEADS, WDSSNet
+    from wdss.nets.wdss.heads import HEADS
+    from wdss.nets.wdss.network import WDSSNet
 
     height, width = size
     kwargs = {} if widths == "paper" else size_widths("small")
-    variants = [("none", "-", "shared_inr")] + [(t, b, h) for t in ("dwt", "swt") for b in BASES for h in HEADS]
+    heads = {head.name: head for head in HEADS}
+    variants = [("none", "-", "shared_inr")] + [(t, b, h) for t in ("dwt", "swt") for b in BASES for h in heads]
     table = Table(
         title=f"inference at {width}x{height} output, {scale}x, {widths} widths, {device}, {repeats} interleaved rounds"
     )
@@ -313,7 +314,7 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     runners, counts = {}, {}
     for transform, basis, head, other in rows:
         if other is None:
-            net = WDSSNet(transform, basis if basis != "-" else "haar", head, **kwargs).to(device).eval()
+            net = WDSSNet(transform, basis if basis != "-" else "haar", heads[head](), **kwargs).to(device).eval()
         else:
             net = other.to(device).eval()
         row_scale = float(net.scale) if net.fixed_scale else scale
@@ -710,30 +711,21 @@ def bench_noise(folders: Sequence[str], frames: Sequence[int] | None, noise_seed
 
 
 class StartArm(torch.nn.Module):
-    """Where a residual network starts, on its own: a copy of the model's learned kernel (trained by an optimiser
-    of its own), the parameter-free upsampler it adds to (``recipe.residual=bilinear|joint_bilateral``), or, for a
-    network without a residual, bilinear upsampling of the demodulated irradiance."""
+    """Where a residual network starts, on its own: a copy of the residual upsampler the model adds to (a learned
+    kernel is then trained by an optimiser of its own; ``residual=bilinear|joint_bilateral|learned_bilateral``), or,
+    for a network without one, bilinear upsampling of the demodulated irradiance. Named ``kernel`` when it learns,
+    else after its upsampling (``joint bilateral``, ``bilinear``)."""
 
     def __init__(self, net: torch.nn.Module) -> None:
         super().__init__()
-        kernel = net.upsampler
-        self.kernel = copy.deepcopy(kernel) if kernel is not None else None
-        self.residual = net.residual
-        self.name = (
-            "kernel"
-            if self.kernel is not None
-            else "joint bilateral"
-            if self.residual == "joint_bilateral"
-            else "bilinear"
-        )
+        upsampler = net.upsampler
+        self.kernel = copy.deepcopy(upsampler) if upsampler is not None else Upsample("bilinear", demodulated=True)
+        learns = next(self.kernel.parameters(), None) is not None
+        self.name = "kernel" if learns else self.kernel.name.replace("_", " ")
 
     def upsample(self, batch: dict) -> torch.Tensor:
         lr, gbuffer, guide, jitter = batch["lr"], batch["gbuffer"], batch.get("lr_guide"), batch.get("lr_jitter")
-        if self.kernel is not None:
-            return self.kernel.upsample(lr, gbuffer, batch.get("brdf"), batch.get("lr_brdf"), guide, jitter)
-        if self.residual == "joint_bilateral":
-            return joint_bilateral_upsample(lr.float(), gbuffer.float(), lr_guide=guide, lr_jitter=jitter)
-        return upsample_lr(lr.float(), gbuffer.shape[-2:], "bilinear", jitter)
+        return self.kernel.upsample(lr, gbuffer, batch.get("brdf"), batch.get("lr_brdf"), guide, jitter)
 
     def forward(self, batch: dict) -> dict:
         irradiance = self.upsample(batch)
@@ -987,7 +979,6 @@ def bench_guidance(
     from wdss.data.layouts import discover_sequences
     from wdss.data.preprocess import Preprocessing
     from wdss.data.properties import PROPERTIES, with_properties
-    from wdss.nets.upsamplers.baselines import Upsample
     from wdss.nets.upsamplers.joint_bilateral import JointBilateralUpsample
     from wdss.training.metrics import ImageMetrics
     from wdss.training.module import SuperResolutionModule
