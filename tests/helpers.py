@@ -3,11 +3,37 @@
 from __future__ import annotations
 
 import torch
+from torch import nn
 
+from wdss.nets.upsamplers.baselines import Upsample
+from wdss.nets.upsamplers.joint_bilateral import JointBilateralUpsample
+from wdss.nets.upsamplers.learned_bilateral import LearnedBilateralUpsample
+from wdss.nets.wdss.heads import HEADS, Head
 from wdss.nets.wdss.network import WIDTHS
 from wdss.ops.sampling import lr_size
 
 TINY = WIDTHS["tiny"]
+
+
+def head(name: str) -> Head:
+    """The head that conf/head/<name>.yaml builds."""
+    return {h.name: h for h in HEADS}[name]()
+
+
+def head_config(name: str) -> dict:
+    """The ``_target_`` node of conf/head/<name>.yaml."""
+    kind = type(head(name))
+    return {"_target_": f"{kind.__module__}.{kind.__qualname__}"}
+
+
+def upsampler(name: str, **kernel_options: bool) -> nn.Module | None:
+    """The residual upsampler that conf/residual/<name>.yaml builds (None for ``none``); ``kernel_options``
+    (``tap_brdf``, ``never_raise``, ``raise_within_albedo``) go to the learned kernel and do nothing otherwise."""
+    if name == "learned_bilateral":
+        return LearnedBilateralUpsample(**kernel_options)
+    if name == "joint_bilateral":
+        return JointBilateralUpsample()
+    return {"none": None, "bilinear": Upsample("bilinear", demodulated=True)}[name]
 
 
 def batch(n: int = 2, size: tuple[int, int] = (16, 20), scale: float = 2.0, seed: int = 0) -> dict:

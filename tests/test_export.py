@@ -23,9 +23,9 @@ CONFIGS = {
     "swt_rir": ["transform=swt", "basis=db4", "model.net.gbuffer_block=rir"],
     "fusion_ll": ["variant=fusion_ll"],
     "dfasr": ["variant=dfasr"],
-    "learned_bilateral": ["transform=swt", "basis=db4", "recipe.residual=learned_bilateral", "recipe.output_space=log"],
+    "learned_bilateral": ["transform=swt", "basis=db4", "residual=learned_bilateral", "recipe.output_space=log"],
     "learned_bilateral_tap_brdf": [
-        "transform=swt", "basis=db4", "recipe.residual=learned_bilateral", "recipe.output_space=log",
+        "transform=swt", "basis=db4", "residual=learned_bilateral", "recipe.output_space=log",
         "recipe.tap_brdf=true",
     ],
 }  # fmt: skip

@@ -21,6 +21,7 @@ GROUPS = (
     "transform",
     "basis",
     "head",
+    "residual",
     "scale",
     "temporal",
     "model",
@@ -168,6 +169,31 @@ def test_every_sweep_job_composes_and_validates(sweep, tmp_path, monkeypatch):
         assert invalid(cfg) is None, job
         module = instantiate(cfg.model)  # the model, its optimiser and scheduler build for every job
         module.configure_optimizers()
+
+
+@pytest.mark.parametrize(
+    "residual, target",
+    [
+        ("none", None),
+        ("bilinear", "wdss.nets.upsamplers.baselines.Upsample"),
+        ("joint_bilateral", "wdss.nets.upsamplers.joint_bilateral.JointBilateralUpsample"),
+        ("learned_bilateral", "wdss.nets.upsamplers.learned_bilateral.LearnedBilateralUpsample"),
+    ],
+)
+def test_the_recipe_sweeps_residual_axis_chooses_the_upsampler_over_the_cpu_recipes(residual, target, tmp_path):
+    """recipe=cpu (experiment=cpu) chooses residual=learned_bilateral; a residual= override (the ablation_recipe
+    sweep's axis) still wins, and the run's params and tags say which residual it used."""
+    from wdss.tracking import run_params, run_tags
+
+    job = ["experiment=cpu", "variant=swt_db4", f"residual={residual}"]
+    upsampler = compose_train(job, tmp_path, SWEEPS, "ablation_recipe").model.net.upsampler
+    assert upsampler is None if target is None else upsampler._target_ == target
+    cfg = compose_train(job, tmp_path)  # a single run of the same job (a sweep's config needs its job number)
+    assert cfg.model.net.upsampler == upsampler
+    assert run_params(cfg)["residual"] == run_tags(cfg)["residual"] == residual
+    default = compose_train(["experiment=cpu"], tmp_path)
+    assert default.model.net.upsampler._target_.endswith(".LearnedBilateralUpsample")
+    assert run_params(default)["residual"] == "learned_bilateral"
 
 
 def test_baseline_rows_replace_the_model_of_an_experiment(tmp_path):

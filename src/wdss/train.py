@@ -28,10 +28,11 @@ from omegaconf import DictConfig, OmegaConf
 from wdss.callbacks import mlflow_callbacks
 from wdss.callbacks.progress_bar import model_line, progress_callbacks
 from wdss.checkpoint import CheckpointError, read_checkpoint
-from wdss.config.targets import TargetRefused, check_targets, instantiate
+from wdss.config.targets import TargetRefused, check_targets, instantiate, resolve
 from wdss.distributed import use_rank_command
 from wdss.errors import ConfigError, entry_point
 from wdss.logfile import log_exception, log_files_to_mlflow
+from wdss.nets.wdss.heads import Head
 from wdss.paths import CONF_DIR
 from wdss.tracking import (
     RUN_ID_FILE,
@@ -87,10 +88,10 @@ def validate(cfg: DictConfig) -> None:
         raise ConfigError(str(err)) from err
     _check_numbers(cfg)
     transform = OmegaConf.select(cfg, "transform.transform")
-    head = OmegaConf.select(cfg, "head.name")
-    baseline = str(OmegaConf.select(cfg, "model.net._target_", default="")).endswith("Upsample")
-    if not baseline and transform == "none" and head in ("fusion_ll", "multi_inr"):
-        raise ConfigError(f"head={head} needs wavelet subbands: it cannot be combined with transform=none")
+    # The head the network builds (conf/head, allowlisted above; none for a baseline) says whether it needs subbands.
+    head = resolve(str(OmegaConf.select(cfg, "model.net.head._target_", default="")))
+    if transform == "none" and isinstance(head, type) and issubclass(head, Head) and head.needs_subbands:
+        raise ConfigError(f"head={head.name} needs wavelet subbands: it cannot be combined with transform=none")
     scale = OmegaConf.select(cfg, "scale.train")
     scale_name = OmegaConf.select(cfg, "scale.name")
     if scale_name == "fixed" and OmegaConf.is_list(scale):

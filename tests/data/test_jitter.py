@@ -7,7 +7,7 @@ import json
 import pytest
 import torch
 
-from tests.helpers import TINY
+from tests.helpers import TINY, head, upsampler
 from wdss.data import Collate, FrameDataset, SceneError, Sequence
 from wdss.data.synthetic import write_sequence
 from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
@@ -95,7 +95,7 @@ def test_the_learned_kernel_starts_as_joint_bilateral_at_the_same_jitter():
 
 def test_the_network_reads_the_jitter_per_sample_in_its_inr_offsets_and_its_residual():
     torch.manual_seed(2)
-    net = WDSSNet("swt", "haar", "shared_inr", False, residual="joint_bilateral", **TINY).eval()
+    net = WDSSNet("swt", "haar", head("shared_inr"), False, upsampler=upsampler("joint_bilateral"), **TINY).eval()
     for p in net.parameters():  # a non-zero exit: the INR's output reaches the image
         p.data.normal_(0, 0.1)
     assert "lr_jitter" in net.inputs

@@ -73,7 +73,7 @@ def test_the_residual_upsampler_a_network_registers_is_the_one_it_uses():
     from wdss.nets.upsamplers.learned_bilateral import LearnedBilateralUpsample
     from wdss.nets.wdss.network import WDSSNet
 
-    net = WDSSNet(residual="learned_bilateral")
+    net = WDSSNet(upsampler=LearnedBilateralUpsample())
     assert isinstance(net.upsampler, LearnedBilateralUpsample) and net.residual == "learned_bilateral"
     assert any(key.startswith("upsampler.") for key in net.state_dict())
     assert WDSSNet().upsampler is None

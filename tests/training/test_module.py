@@ -8,7 +8,7 @@ import torch
 import torch.nn.functional as F
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
-from tests.helpers import TINY, batch, losses_over_steps
+from tests.helpers import TINY, batch, head_config, losses_over_steps
 from tests.nets.wdss.test_network import VARIANTS
 from wdss.config.sizes import size_widths
 from wdss.training.losses import WDSSLoss, temporal_difference_loss
@@ -23,7 +23,7 @@ def module(transform="swt", basis="haar", head="shared_inr", temporal=True, widt
         "_target_": "wdss.nets.wdss.network.WDSSNet",
         "transform": transform,
         "basis": basis,
-        "head": head,
+        "head": head_config(head),
         "temporal": temporal,
         **{k: list(v) if isinstance(v, tuple) else v for k, v in widths.items()},
     }
@@ -193,7 +193,7 @@ def test_checkpoint_round_trip_rebuilds_the_model(tmp_path):
     path = tmp_path / "model.ckpt"
     trainer.save_checkpoint(path)
     loaded = SuperResolutionModule.load_from_checkpoint(path, weights_only=True)
-    assert loaded.net.transform == "dwt" and loaded.net.head == "fusion_ll"
+    assert loaded.net.transform == "dwt" and loaded.net.head.name == "fusion_ll"
     model.eval()
     loaded.eval()
     with torch.no_grad():

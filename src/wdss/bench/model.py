@@ -18,11 +18,13 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     import inspect
 
     from wdss.nets.profile import dummy_inputs, flops
-    from wdss.nets.wdss.network import HEADS, WDSSNet
+    from wdss.nets.wdss.heads import HEADS
+    from wdss.nets.wdss.network import WDSSNet
 
     height, width = size
     kwargs = {} if widths == "paper" else size_widths("small")
-    variants = [("none", "-", "shared_inr")] + [(t, b, h) for t in ("dwt", "swt") for b in BASES for h in HEADS]
+    heads = {head.name: head for head in HEADS}
+    variants = [("none", "-", "shared_inr")] + [(t, b, h) for t in ("dwt", "swt") for b in BASES for h in heads]
     table = Table(
         title=f"inference at {width}x{height} output, {scale}x, {widths} widths, {device}, {repeats} interleaved rounds"
     )
@@ -34,7 +36,7 @@ def bench_model(size: tuple[int, int], scale: float, repeats: int, device: str, 
     runners, counts = {}, {}
     for transform, basis, head, other in rows:
         if other is None:
-            net = WDSSNet(transform, basis if basis != "-" else "haar", head, **kwargs).to(device).eval()
+            net = WDSSNet(transform, basis if basis != "-" else "haar", heads[head](), **kwargs).to(device).eval()
         else:
             net = other.to(device).eval()
         row_scale = float(net.scale) if net.fixed_scale else scale

@@ -8,6 +8,7 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
+from wdss.config.targets import instantiate
 from wdss.paths import CONF_DIR
 
 __all__ = ["model_net_settings", "size_widths"]
@@ -27,11 +28,15 @@ def size_widths(size: str, model: str = "wdss") -> dict[str, Any]:
 
 def model_net_settings(model: str) -> dict[str, Any]:
     """What ``conf/model/<model>.yaml`` itself sets on its network (not what it inherits from its defaults), as
-    keyword arguments of :class:`~wdss.nets.wdss.network.WDSSNet`: a ``wavelet`` node becomes its ``transform``."""
+    keyword arguments of :class:`~wdss.nets.wdss.network.WDSSNet`: a ``wavelet`` node becomes its ``transform``, and
+    another node with a ``_target_`` (its ``head``) is built, through the allowlist."""
     path = CONF_DIR / "model" / f"{model}.yaml"
     net = dict(OmegaConf.to_container(OmegaConf.load(path), resolve=False).get("net") or {})
     net.pop("_target_", None)
     wavelet = net.pop("wavelet", None)
     if isinstance(wavelet, dict):
         net["transform"] = wavelet["transform"]
+    for key, value in net.items():
+        if isinstance(value, dict) and "_target_" in value:
+            net[key] = instantiate(value, at=f"net.{key}")
     return net

@@ -40,6 +40,7 @@ __all__ = [
     "TargetRefused",
     "check_config",
     "check_targets",
+    "composed_wdss_net",
     "instantiate",
     "moved",
     "refuse_interpolation",
@@ -60,6 +61,12 @@ KINDS: Mapping[str, Mapping[str, tuple[str, ...]]] = {
         "wdss.nets.comparison.fusesr": ("FuseSR",),
     },
     "wavelet transform": {"wdss.wavelets": ("WaveletTransform",)},
+    "network head": {"wdss.nets.wdss.heads": ("SharedINR", "MultiINR", "FusionLL")},
+    "residual upsampler": {
+        "wdss.nets.upsamplers.baselines": ("Upsample",),
+        "wdss.nets.upsamplers.joint_bilateral": ("JointBilateralUpsample",),
+        "wdss.nets.upsamplers.learned_bilateral": ("LearnedBilateralUpsample",),
+    },
     # not LambdaLR/MultiplicativeLR: they take a function
     "optimizer": {
         "torch.optim": ("SGD", "Adam", "AdamW", "Adamax", "Adagrad", "Adadelta", "RMSprop", "NAdam", "RAdam"),
@@ -111,6 +118,27 @@ MOVED: Mapping[str, str] = {
     "wdss.model.fusesr.FuseSR": "wdss.nets.comparison.fusesr.FuseSR",
     "wdss.averaging.EMAWeightAveraging": "wdss.callbacks.averaging.EMAWeightAveraging",
 }
+WDSS_NET = "wdss.nets.wdss.network.WDSSNet"
+# Before issue 39 composed WDSSNet, it took its head and its residual upsampler by name (``head: shared_inr``,
+# ``residual: learned_bilateral``) and the learned kernel's options beside them; checkpoints of then store that shape.
+# :func:`composed_wdss_net` rewrites it into today's with these: each old name -> the config that builds it now
+# (conf/head, conf/residual), and each kernel option -> its name on the kernel.
+OLD_HEADS: Mapping[str, str] = {
+    "shared_inr": "wdss.nets.wdss.heads.SharedINR",
+    "multi_inr": "wdss.nets.wdss.heads.MultiINR",
+    "fusion_ll": "wdss.nets.wdss.heads.FusionLL",
+}
+OLD_RESIDUALS: Mapping[str, Mapping[str, Any] | None] = {
+    "none": None,
+    "bilinear": {"_target_": "wdss.nets.upsamplers.baselines.Upsample", "mode": "bilinear", "demodulated": True},
+    "joint_bilateral": {"_target_": "wdss.nets.upsamplers.joint_bilateral.JointBilateralUpsample"},
+    "learned_bilateral": {"_target_": "wdss.nets.upsamplers.learned_bilateral.LearnedBilateralUpsample"},
+}
+OLD_KERNEL_OPTIONS: Mapping[str, str] = {
+    "tap_brdf": "tap_brdf",
+    "kernel_never_raise": "never_raise",
+    "kernel_raise_within_albedo": "raise_within_albedo",
+}
 # The classes and factories (``class:``, ``()``) that Hydra's logging configs may name (logging.config.dictConfig
 # builds them with their keys as arguments: any class would do, subprocess.Popen included).
 LOGGING: Mapping[str, tuple[str, ...]] = {
@@ -125,6 +153,8 @@ _STREAMS = ("ext://sys.stdout", "ext://sys.stderr")  # dictConfig's ext:// impor
 _MODULE_SLOTS = {
     ("net",): "network",
     ("net", "wavelet"): "wavelet transform",
+    ("net", "head"): "network head",
+    ("net", "upsampler"): "residual upsampler",
     ("optimizer",): "optimizer",
     ("scheduler",): "scheduler",
 }
@@ -134,6 +164,8 @@ SLOTS: Mapping[tuple[str, ...], str] = {
     **{("model", *path): kind for path, kind in _MODULE_SLOTS.items()},
     **{("hyper_parameters", *path): kind for path, kind in _MODULE_SLOTS.items()},
     ("transform",): "wavelet transform",  # the transform group, which model.net.wavelet interpolates
+    ("head",): "network head",  # the head group, which model.net.head interpolates
+    ("residual", "upsampler"): "residual upsampler",  # the residual group, which model.net.upsampler interpolates
     ("data",): "data module",
     ("data", "prepare"): "data preparer",
     ("trainer",): "trainer",
@@ -148,7 +180,7 @@ SLOTS: Mapping[tuple[str, ...], str] = {
 ALLOWED: Mapping[str, tuple[str, ...]] = {}
 for _modules in KINDS.values():
     for _module, _names in _modules.items():
-        ALLOWED[_module] = (*ALLOWED.get(_module, ()), *_names)  # type: ignore[index]
+        ALLOWED[_module] = tuple(dict.fromkeys((*ALLOWED.get(_module, ()), *_names)))  # type: ignore[index]
 # The listed modules and their parent packages: the only modules resolving a path may import.
 _IMPORTABLE = frozenset(
     ".".join(m.split(".")[:end]) for m in (*ALLOWED, *LOGGING) for end in range(1, m.count(".") + 2)
@@ -275,14 +307,41 @@ def _has_interpolation(node: Any) -> bool:
     return False
 
 
+def composed_wdss_net(net: Mapping[str, Any]) -> dict[str, Any]:
+    """A WDSSNet config (plain containers) of the shape before issue 39 composed the network -- ``head`` and
+    ``residual`` by name, the learned kernel's ``tap_brdf``, ``kernel_never_raise`` and ``kernel_raise_within_albedo``
+    beside them -- in today's shape: ``head`` the node that builds that head, ``upsampler`` the node that builds that
+    residual upsampler (None for ``none``), the kernel's options on the kernel (without it they did nothing, and are
+    dropped). A name it does not know is kept, for the network to refuse; a config of today's shape is returned as
+    it is."""
+    head, old = net.get("head"), [key for key in ("residual", *OLD_KERNEL_OPTIONS) if key in net]
+    if not isinstance(head, str) and not old:
+        return dict(net)
+    new: dict[str, Any] = {}
+    for key, value in net.items():
+        if key == "head" and isinstance(value, str):
+            new[key] = {"_target_": OLD_HEADS[value]} if value in OLD_HEADS else value
+        elif key not in old:
+            new[key] = value
+        elif key == "residual" and "upsampler" not in net:
+            upsampler = OLD_RESIDUALS.get(value, value) if isinstance(value, str) else value
+            if value == "learned_bilateral":
+                options = {OLD_KERNEL_OPTIONS[option]: net[option] for option in OLD_KERNEL_OPTIONS if option in net}
+                upsampler = {**upsampler, **options}
+            new["upsampler"] = dict(upsampler) if isinstance(upsampler, Mapping) else upsampler
+    return new
+
+
 def moved(node: Any) -> Any:
     """``node`` (plain containers, as a checkpoint stores them) with every ``_target_`` that :data:`MOVED` lists
-    renamed to where it lives now; everything else as it was."""
+    renamed to where it lives now, and every WDSSNet config of the shape before the network was composed rewritten
+    into today's (:func:`composed_wdss_net`); everything else as it was."""
     if isinstance(node, Mapping):
-        return {
+        renamed = {
             name: MOVED.get(value, value) if name == "_target_" and isinstance(value, str) else moved(value)
             for name, value in node.items()
         }
+        return composed_wdss_net(renamed) if renamed.get("_target_") == WDSS_NET else renamed
     if isinstance(node, list | tuple):
         return type(node)(moved(value) for value in node)
     return node

@@ -17,6 +17,13 @@ A network (:class:`SuperResolutionNet`) declares:
 - ``input_log``: True when it takes log1p of its HDR inputs itself (the export sidecar says so).
 - ``upsampler`` and ``residual``: the upsampler its output is a residual over (a module, e.g. the learned kernel)
   and its name (``none`` without one), which the benchmarks separate from what the network adds.
+
+A residual upsampler (the ``residual`` config group builds one: :class:`~wdss.nets.upsamplers.baselines.Upsample`,
+:class:`~wdss.nets.upsamplers.joint_bilateral.JointBilateralUpsample`,
+:class:`~wdss.nets.upsamplers.learned_bilateral.LearnedBilateralUpsample`) declares ``upsample_inputs`` (the batch
+keys it reads), ``name`` (what runs and tables call it) and
+``upsample(lr, gbuffer, brdf, lr_brdf, lr_guide, lr_jitter)``: the LR irradiance on the HR grid of ``gbuffer``,
+float32; the network it serves asks it for those rather than for its class.
 """
 
 from __future__ import annotations

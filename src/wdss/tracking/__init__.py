@@ -53,6 +53,7 @@ GROUPS = (
     "transform",
     "basis",
     "head",
+    "residual",
     "scale",
     "temporal",
     "model",
@@ -88,8 +89,9 @@ def _hydra() -> Any | None:
 # an item starts only where a key and "=" follow the comma.
 _ITEM = re.compile(r",(?=[+~]*[\w.@/-]+=)")
 NAME_SEPARATOR = " · "
-# Config groups a baseline ignores (it has no wavelet, head or temporal branch): neither named nor tagged for it.
-_BASELINE_IGNORES = ("transform", "basis", "head", "temporal", "scale")
+# Config groups a baseline ignores (it has no wavelet, head, residual or temporal branch): neither named nor tagged
+# for it.
+_BASELINE_IGNORES = ("transform", "basis", "head", "residual", "temporal", "scale")
 
 
 def split_overrides(text: str) -> list[tuple[str, str | None]]:
@@ -202,7 +204,6 @@ PARAMS = (
     "scale.train",
     "data.test_scales",
     "loss.space",
-    "model.net.residual",
     "model.tonemap_name",  # the report's metric path
     "tonemap_exposure",
 )
@@ -212,6 +213,7 @@ PARAM_GROUPS = (
     "transform",
     "basis",
     "head",
+    "residual",
     "scale",
     "temporal",
     "size",

@@ -45,7 +45,7 @@ def test_learn_gives_each_arm_its_own_start_and_scores_every_frame_of_the_valida
     monkeypatch.setattr(learn, "StartArm", Recorded)
     monkeypatch.setattr(SceneDataModule, "_dataset", spy)
     monkeypatch.setattr(learn, "_learn_setup", keep)
-    overrides = ["experiment=smoke", f"recipe.residual={residual}", "recipe.output_space=log", "recipe.tap_brdf=true"]
+    overrides = ["experiment=smoke", f"residual={residual}", "recipe.output_space=log", "recipe.tap_brdf=true"]
     curve, final = learn.bench_learn(overrides, steps=3, every=3, seeds=[0], scales=[2.0, 4.0])
     # Full frames (no patch) of the validation split, at every scale asked for.
     assert {("val", 2.0, None), ("val", 4.0, None)} <= set(read)
@@ -72,7 +72,7 @@ def test_learn_gives_each_arm_its_own_start_and_scores_every_frame_of_the_valida
 
 
 def test_learn_states_each_gain_with_its_interval_over_seeds():
-    overrides = ["experiment=smoke", "recipe.residual=learned_bilateral"]
+    overrides = ["experiment=smoke", "residual=learned_bilateral"]
     curve, final = learn.bench_learn(overrides, steps=2, every=1, seeds=[0, 1], scales=[3.0])
     assert _cells(curve)["step"] == ["0", "1", "2"]
     gain = _cells(final)["PSNR 3x"][3]  # model - kernel: mean +- half-width (seed 0, seed 1)

@@ -8,7 +8,7 @@ import pytest
 import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 
-from tests.helpers import TINY, batch
+from tests.helpers import TINY, batch, head
 from wdss.nets.blocks import RIRBlock
 from wdss.nets.wdss.network import WDSSNet, shuffle_channels_last
 
@@ -25,9 +25,9 @@ def run(net: WDSSNet, data: dict) -> dict:
     return net(**{k: data[k] for k in (*net.inputs, "scale")})
 
 
-@pytest.mark.parametrize("transform,basis,head,temporal", VARIANTS)
-def test_forward_shapes_of_every_variant(transform, basis, head, temporal):
-    net = WDSSNet(transform, basis, head, temporal, **TINY)
+@pytest.mark.parametrize("transform,basis,head_name,temporal", VARIANTS)
+def test_forward_shapes_of_every_variant(transform, basis, head_name, temporal):
+    net = WDSSNet(transform, basis, head(head_name), temporal, **TINY)
     data = batch(size=(16, 20))
     out = run(net, data)
     assert out["irradiance"].shape == (2, 3, 16, 20) and (out["irradiance"] >= 0).all()
@@ -47,9 +47,11 @@ def test_any_scale_and_frames_not_divisible_by_it(transform, scale):
 
 def test_heads_that_need_subbands_refuse_transform_none():
     with pytest.raises(ValueError, match="head=fusion_ll needs wavelet subbands, but transform=none"):
-        WDSSNet("none", "haar", "fusion_ll")
-    with pytest.raises(ValueError, match="model.head must be one of"):
+        WDSSNet("none", "haar", head("fusion_ll"))
+    with pytest.raises(ValueError, match=r"model.net.head must be a head of wdss.nets.wdss.heads .*got 'two_inr'"):
         WDSSNet("swt", "haar", "two_inr")
+    with pytest.raises(ValueError, match=r"model.net.upsampler must be a residual upsampler .*got 'bilinear'"):
+        WDSSNet("swt", "haar", upsampler="bilinear")
 
 
 def test_a_temporal_network_asks_for_history():

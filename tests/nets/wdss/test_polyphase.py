@@ -9,6 +9,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from tests.helpers import upsampler
 from wdss.export import export_onnx, run_onnx
 from wdss.nets.profile import dummy_inputs
 from wdss.nets.wdss.network import WIDTHS, WDSSNet
@@ -89,7 +90,7 @@ def test_the_tail_on_cells_has_exact_gradients():
 
 def tiny_swt_net() -> WDSSNet:
     torch.manual_seed(0)
-    return WDSSNet("swt", "db4", residual="bilinear", exit_init=1.0, **WIDTHS["tiny"]).eval()
+    return WDSSNet("swt", "db4", upsampler=upsampler("bilinear"), exit_init=1.0, **WIDTHS["tiny"]).eval()
 
 
 def test_a_channels_last_network_without_subbands_computes_its_tail_on_cells(tail_calls):

@@ -7,15 +7,18 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from tests.helpers import TINY, batch
+from tests.helpers import TINY, batch, head, upsampler
 from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
 from wdss.nets.wdss.network import WDSSNet
 from wdss.ops.tonemap import ToneMap, hable
 from wdss.training.losses import WDSSLoss
 
 
-def net(transform="swt", basis="db4", head="shared_inr", **kwargs):
-    return WDSSNet(transform, basis, head, temporal=False, **TINY, **kwargs)
+def net(transform="swt", basis="db4", head_name="shared_inr", residual="none", tap_brdf=False, **kwargs):
+    """A tiny network without a temporal branch; ``residual``: the residual group's option (``tap_brdf``: the learned
+    kernel's option, which does nothing for another)."""
+    kernel = upsampler(residual, tap_brdf=tap_brdf) if residual == "learned_bilateral" else upsampler(residual)
+    return WDSSNet(transform, basis, head(head_name), temporal=False, upsampler=kernel, **TINY, **kwargs)
 
 
 def forward(model, data):
@@ -176,9 +179,13 @@ def test_the_learned_kernel_with_tap_brdf_is_the_residual_base_and_is_fed_the_br
 def test_the_cpu_experiment_turns_tap_brdf_on_for_the_learned_kernel():
     from tests.test_train import compose_train
 
-    for variant in ("swt_db4", "learned_bilateral"):
-        assert compose_train([f"variant={variant}", "experiment=cpu"]).model.net.tap_brdf is True
-        assert compose_train([f"variant={variant}"]).model.net.tap_brdf is False
+    kernel = compose_train(["variant=swt_db4", "experiment=cpu"]).model.net.upsampler  # the residual group's
+    assert kernel._target_.endswith(".LearnedBilateralUpsample") and kernel.tap_brdf is True
+    assert kernel.raise_within_albedo is True and kernel.never_raise is False
+    assert compose_train(["variant=swt_db4", "residual=learned_bilateral"]).model.net.upsampler.tap_brdf is False
+    assert compose_train(["variant=swt_db4"]).model.net.upsampler is None  # the paper's: no residual
+    assert compose_train(["variant=learned_bilateral", "experiment=cpu"]).model.net.tap_brdf is True
+    assert compose_train(["variant=learned_bilateral"]).model.net.tap_brdf is False
     colour = compose_train(["variant=joint_bilateral_color", "experiment=cpu"]).model.net
     assert colour.demodulated is False
 

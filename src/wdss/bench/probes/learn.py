@@ -13,35 +13,25 @@ from rich.table import Table
 
 from wdss.data.preprocess import prediction_color
 from wdss.nets.blocks import from_log, to_log
-from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
-from wdss.ops.sampling import upsample as upsample_lr
+from wdss.nets.upsamplers.baselines import Upsample
 
 
 class StartArm(torch.nn.Module):
-    """Where a residual network starts, on its own: a copy of the model's learned kernel (trained by an optimiser
-    of its own), the parameter-free upsampler it adds to (``recipe.residual=bilinear|joint_bilateral``), or, for a
-    network without a residual, bilinear upsampling of the demodulated irradiance."""
+    """Where a residual network starts, on its own: a copy of the residual upsampler the model adds to (a learned
+    kernel is then trained by an optimiser of its own; ``residual=bilinear|joint_bilateral|learned_bilateral``), or,
+    for a network without one, bilinear upsampling of the demodulated irradiance. Named ``kernel`` when it learns,
+    else after its upsampling (``joint bilateral``, ``bilinear``)."""
 
     def __init__(self, net: torch.nn.Module) -> None:
         super().__init__()
-        kernel = net.upsampler
-        self.kernel = copy.deepcopy(kernel) if kernel is not None else None
-        self.residual = net.residual
-        self.name = (
-            "kernel"
-            if self.kernel is not None
-            else "joint bilateral"
-            if self.residual == "joint_bilateral"
-            else "bilinear"
-        )
+        upsampler = net.upsampler
+        self.kernel = copy.deepcopy(upsampler) if upsampler is not None else Upsample("bilinear", demodulated=True)
+        learns = next(self.kernel.parameters(), None) is not None
+        self.name = "kernel" if learns else self.kernel.name.replace("_", " ")
 
     def upsample(self, batch: dict) -> torch.Tensor:
         lr, gbuffer, guide, jitter = batch["lr"], batch["gbuffer"], batch.get("lr_guide"), batch.get("lr_jitter")
-        if self.kernel is not None:
-            return self.kernel.upsample(lr, gbuffer, batch.get("brdf"), batch.get("lr_brdf"), guide, jitter)
-        if self.residual == "joint_bilateral":
-            return joint_bilateral_upsample(lr.float(), gbuffer.float(), lr_guide=guide, lr_jitter=jitter)
-        return upsample_lr(lr.float(), gbuffer.shape[-2:], "bilinear", jitter)
+        return self.kernel.upsample(lr, gbuffer, batch.get("brdf"), batch.get("lr_brdf"), guide, jitter)
 
     def forward(self, batch: dict) -> dict:
         irradiance = self.upsample(batch)

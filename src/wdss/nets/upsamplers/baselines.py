@@ -3,7 +3,8 @@
 ``bilinear`` and ``bicubic`` upsample the low-resolution colour; ``bilinear_demodulated`` upsamples the
 demodulated irradiance and remodulates it with the high-resolution BRDF, which restores texture detail
 from the G-buffer for free. Upsampling aligns cell centres (``align_corners=False``), as the data does, and
-places a jittered LR frame's pixels where they were shaded (``lr_jitter``).
+places a jittered LR frame's pixels where they were shaded (``lr_jitter``). The same module is also a residual base
+of the WDSS network (``residual=bilinear``: :meth:`Upsample.upsample`).
 """
 
 from __future__ import annotations
@@ -25,10 +26,29 @@ class Upsample(SuperResolutionNet):
             raise ValueError(f"baseline mode must be 'bilinear' or 'bicubic', got {mode!r}")
         self.mode, self.demodulated = mode, demodulated
         self.transform = "none"
+        self.name = mode  # as a residual base (wdss.nets.base)
 
     @property
     def inputs(self) -> tuple[str, ...]:
         return ("lr", "lr_jitter") if self.demodulated else ("lr_color", "brdf", "lr_jitter")
+
+    @property
+    def upsample_inputs(self) -> tuple[str, ...]:
+        """The batch keys :meth:`upsample` reads."""
+        return ("lr", "lr_jitter")
+
+    def upsample(
+        self,
+        lr: Tensor,
+        gbuffer: Tensor,
+        brdf: Tensor | None = None,
+        lr_brdf: Tensor | None = None,
+        lr_guide: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
+    ) -> Tensor:
+        """``lr`` (N, C, h, w) upsampled to the grid of ``gbuffer`` in float32, as a residual base (the residual
+        upsampler's signature, wdss.nets.base; only the grid's size and the jitter are read)."""
+        return upsample(lr.float(), gbuffer.shape[-2:], self.mode, lr_jitter)
 
     def forward(
         self,

@@ -233,11 +233,39 @@ class JointBilateralUpsample(SuperResolutionNet):
         self.radius = int(radius)
         self.demodulated = bool(demodulated)
         self.transform = "none"
+        self.name = "joint_bilateral"  # as a residual base (wdss.nets.base)
 
     @property
     def inputs(self) -> tuple[str, ...]:
         keys = ("lr", "gbuffer") if self.demodulated else ("lr_color", "gbuffer", "brdf")
         return (*keys, "lr_guide", "lr_jitter")
+
+    @property
+    def upsample_inputs(self) -> tuple[str, ...]:
+        """The batch keys :meth:`upsample` reads."""
+        return ("lr", "gbuffer", "lr_guide", "lr_jitter")
+
+    def upsample(
+        self,
+        lr: Tensor,
+        gbuffer: Tensor,
+        brdf: Tensor | None = None,
+        lr_brdf: Tensor | None = None,
+        lr_guide: Tensor | None = None,
+        lr_jitter: Tensor | None = None,
+    ) -> Tensor:
+        """:func:`joint_bilateral_upsample` of ``lr`` (N, C, h, w) in float32 with this module's ranges, as a residual
+        base (the residual upsampler's signature, wdss.nets.base; the BRDF factors are not read)."""
+        return joint_bilateral_upsample(
+            lr.float(),
+            gbuffer.float(),
+            lr_guide=lr_guide,
+            lr_jitter=lr_jitter,
+            sigma_depth=self.sigma_depth,
+            sigma_normal=self.sigma_normal,
+            sigma_albedo=self.sigma_albedo,
+            radius=self.radius,
+        )
 
     def forward(
         self,

@@ -32,7 +32,7 @@ where the last layer's outputs all move above it no gradient reaches the MLP. Th
 
 Why: at CPU scale the WDSS network barely leaves its starting point in a few hundred steps, while this kernel
 (625 parameters, 690 with ``tap_brdf``) learns a correction that generalises to unseen scenes within a hundred
-(docs/results.md, "Where CPU models stand"). It is the residual base ``recipe.residual=learned_bilateral`` of the
+(docs/results.md, "Where CPU models stand"). It is the residual base ``residual=learned_bilateral`` of the
 network and a model of its own (``model=learned_bilateral``), so the two contributions are separate ablation rows.
 """
 
@@ -103,9 +103,15 @@ class LearnedBilateralUpsample(SuperResolutionNet):
         nn.init.zeros_(self.mlp[-1].weight)  # start exactly at joint bilateral upsampling
         nn.init.zeros_(self.mlp[-1].bias)
         self.transform = "none"  # as a model of its own: an image, no subbands
+        self.name = "learned_bilateral"  # as a residual base (wdss.nets.base)
 
     @property
     def inputs(self) -> tuple[str, ...]:
+        return self.upsample_inputs
+
+    @property
+    def upsample_inputs(self) -> tuple[str, ...]:
+        """The batch keys :meth:`upsample` reads (the BRDF factors with ``tap_brdf`` only)."""
         return ("lr", "gbuffer", "lr_guide", "lr_jitter") + (("brdf", "lr_brdf") if self.tap_brdf else ())
 
     def upsample(

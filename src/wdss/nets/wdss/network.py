@@ -24,20 +24,14 @@ from torch import Tensor, nn
 
 from wdss.nets.base import SuperResolutionNet
 from wdss.nets.blocks import DoubleResidual, GatedConv, RIRBlock, conv3x3, from_log, to_log
-from wdss.nets.upsamplers.joint_bilateral import joint_bilateral_upsample
-from wdss.nets.upsamplers.learned_bilateral import LearnedBilateralUpsample
+from wdss.nets.wdss.heads import Head, SharedINR
 from wdss.nets.wdss.polyphase import fits_cells, swt_tail_on_cells
-from wdss.ops.sampling import upsample
 from wdss.wavelets import WaveletTransform
 
-__all__ = ["HEADS", "OUTPUT_SPACES", "RESIDUALS", "WIDTHS", "WDSSNet"]
+__all__ = ["OUTPUT_SPACES", "WIDTHS", "WDSSNet"]
 
-HEADS = ("shared_inr", "multi_inr", "fusion_ll")
 # What the head's coefficients (or image, for transform=none) represent: irradiance (the paper) or log1p of it.
 OUTPUT_SPACES = ("linear", "log")
-# What the head adds its prediction to: nothing (the paper), or the LR irradiance upsampled by a fixed method or by
-# joint bilateral upsampling with learned tap weights (trained with the network, starting as joint bilateral).
-RESIDUALS = ("none", "bilinear", "joint_bilateral", "learned_bilateral")
 # A width preset for tests and stability checks (the presets runs use are the size configs, conf/size/*.yaml:
 # wdss.config.sizes reads them).
 WIDTHS: dict[str, dict] = {
@@ -283,18 +277,20 @@ class Refinement(nn.Module):
 class WDSSNet(SuperResolutionNet):
     """The WDSS super-resolution network for one transform x basis x head x temporal choice.
 
-    ``transform``: ``none | dwt | swt``; ``basis``: an orthogonal PyWavelets basis; ``head``:
-    ``shared_inr`` (fusion + INR summed), ``multi_inr`` (one INR MLP per subband), ``fusion_ll`` (fusion
-    predicts LL, the INR the details); ``temporal``: whether the temporal branch exists. Widths default to
-    the paper's (~0.57 M parameters with the SWT head). A ``wavelet`` module (as the ``transform`` config
-    group builds it) replaces ``transform`` and ``basis``.
+    ``transform``: ``none | dwt | swt``; ``basis``: an orthogonal PyWavelets basis; ``head``: a
+    :class:`~wdss.nets.wdss.heads.Head` (default :class:`~wdss.nets.wdss.heads.SharedINR`, the paper's), which gives
+    the fusion branch's and the INR's widths and merges their outputs; ``temporal``: whether the temporal branch
+    exists. Widths default to the paper's (~0.57 M parameters with the SWT head). A ``wavelet`` module (as the
+    ``transform`` config group builds it) replaces ``transform`` and ``basis``. ``upsampler``: a residual upsampler
+    (wdss.nets.base; the ``residual`` config group builds one) whose upsampling of the LR irradiance the head's
+    prediction is added to, or None (the paper): nothing.
     """
 
     def __init__(
         self,
         transform: str = "swt",
         basis: str = "haar",
-        head: str = "shared_inr",
+        head: Head | None = None,
         temporal: bool = True,
         *,
         lr_widths: Sequence[int] = (32, 48, 48, 64),
@@ -314,34 +310,26 @@ class WDSSNet(SuperResolutionNet):
         fusion_final_relu: bool = False,
         phase_bias: bool = True,
         output_space: str = "linear",
-        residual: str = "none",
+        upsampler: nn.Module | None = None,
         exit_init: float = 0.0,
         residual_input: bool = False,
-        tap_brdf: bool = False,
         refine_width: int = 0,
         refine_depth: int = 3,
-        kernel_never_raise: bool = False,
-        kernel_raise_within_albedo: bool = False,
     ) -> None:
         super().__init__()
         if output_space not in OUTPUT_SPACES:
             raise ValueError(f"model.output_space must be one of {', '.join(OUTPUT_SPACES)}, got {output_space!r}")
-        if residual not in RESIDUALS:
-            raise ValueError(f"model.residual must be one of {', '.join(RESIDUALS)}, got {residual!r}")
-        self.output_space, self.residual = output_space, residual
-        # tap_brdf, kernel_never_raise and kernel_raise_within_albedo are the learned kernel's options (a per-tap BRDF
-        # exponent; corrections that only lower tap weights; raises only within one albedo): without it they do nothing.
-        self.upsampler = (
-            LearnedBilateralUpsample(
-                tap_brdf=tap_brdf, never_raise=kernel_never_raise, raise_within_albedo=kernel_raise_within_albedo
-            )
-            if residual == "learned_bilateral"
-            else None
-        )
-        if residual_input and residual == "none":
+        self.output_space = output_space
+        if upsampler is not None and not isinstance(upsampler, nn.Module):
             raise ValueError(
-                "model.residual_input needs a residual upsampler (model.residual: bilinear, joint_bilateral or "
-                "learned_bilateral)"
+                f"model.net.upsampler must be a residual upsampler (conf/residual/*.yaml) or None, got {upsampler!r}"
+            )
+        # Registered first, as the network always built its learned kernel: the same state_dict order.
+        self.upsampler = upsampler
+        if residual_input and upsampler is None:
+            raise ValueError(
+                "model.net.residual_input (recipe.residual_input) needs a residual upsampler "
+                "(residual=bilinear, joint_bilateral or learned_bilateral)"
             )
         # The G-buffer branch also sees the upsampled irradiance the head corrects: the correction depends on where
         # that upsampling errs, which the network cannot see from the LR and G-buffers alone.
@@ -350,11 +338,12 @@ class WDSSNet(SuperResolutionNet):
             if wavelet.level != 1:
                 raise ValueError(f"the network heads use one wavelet level, got level={wavelet.level}")
             transform, basis = wavelet.transform, wavelet.wavelet
-        if head not in HEADS:
-            raise ValueError(f"model.head must be one of {', '.join(HEADS)}, got {head!r}")
-        if head != "shared_inr" and transform == "none":
+        head = SharedINR() if head is None else head
+        if not isinstance(head, Head):
+            raise ValueError(f"model.net.head must be a head of wdss.nets.wdss.heads (conf/head/*.yaml), got {head!r}")
+        if head.needs_subbands and transform == "none":
             raise ValueError(
-                f"head={head} needs wavelet subbands, but transform=none has none: use transform=dwt or swt"
+                f"head={head.name} needs wavelet subbands, but transform=none has none: use transform=dwt or swt"
             )
         self.transform, self.basis, self.head, self.temporal = transform, basis, head, temporal
         self.input_log = input_log
@@ -372,9 +361,7 @@ class WDSSNet(SuperResolutionNet):
         gbuffer_in = n_gbuffer + 1 + (RGB if self.residual_input else 0)
         self.gbuffer = GBufferExtractor(4 * gbuffer_in, gbuffer_width, gbuffer_block)
         self.temporal_branch = TemporalExtractor(4 * (RGB + 5), temporal_widths) if temporal else None
-        ll = self.half_channels // 4  # LL is the first quarter of band-major channels
-        fusion_out = ll if head == "fusion_ll" else self.half_channels
-        inr_out = self.half_channels - ll if head == "fusion_ll" else self.half_channels
+        fusion_out, inr_out = head.widths(self.half_channels)
         fusion_in = self.lr.split + self.gbuffer.split + (temporal_widths[-1] if temporal else 0)
         chans = [fusion_in, *fusion_widths]
         layers: list[nn.Module] = [
@@ -383,16 +370,15 @@ class WDSSNet(SuperResolutionNet):
         self.fusion = nn.Sequential(
             *layers, conv3x3(chans[-1], fusion_out), *([nn.ReLU()] if fusion_final_relu else [])
         )
-        groups = 4 if head == "multi_inr" else 1
         self.inr = FourierINR(
             lr_widths[-1] - self.lr.split, gbuffer_width - self.gbuffer.split, inr_width, mlp_width, mlp_depth,
-            inr_out, groups, multi_inr_width, final_relu, phase_bias,
+            inr_out, head.inr_groups, multi_inr_width, final_relu, phase_bias,
         )  # fmt: skip
         # Exit convolution: on RGB at H (none), on the DWT bands at H/2, on the SWT subbands at H.
         exit_channels = RGB if transform == "none" else self.coeff_channels
         self.exit = conv3x3(exit_channels, exit_channels)
         self.refine = Refinement(RGB + n_gbuffer + 1, refine_width, refine_depth) if refine_width else None
-        if residual != "none":
+        if upsampler is not None:
             # exit_init 0: the network starts exactly as its upsampler (its correction is zero); > 0 scales the
             # default initialisation instead: a zero exit passes no gradient to the layers before it, which then
             # stay at their random initialisation for long, as the exit's own weights grow only slowly.
@@ -401,13 +387,17 @@ class WDSSNet(SuperResolutionNet):
                 self.exit.bias.mul_(exit_init)
 
     @property
+    def residual(self) -> str:
+        """The residual upsampler's name, ``none`` without one."""
+        return "none" if self.upsampler is None else self.upsampler.name
+
+    @property
     def inputs(self) -> tuple[str, ...]:
-        """The batch keys this network consumes (the data side reads exactly what these need)."""
+        """The batch keys this network consumes (the data side reads exactly what these need): its own, then those
+        of its residual upsampler that it does not read itself, and ``lr_jitter`` (the INR's offsets)."""
         keys = ("lr", "gbuffer", "spatial_mask") + (("history", "temporal_mask") if self.temporal else ())
-        if self.residual in ("joint_bilateral", "learned_bilateral"):  # the kernel compares against the LR's guide
-            keys += ("lr_guide",)
-        keys += ("lr_jitter",)  # where the LR pixels were shaded: the INR's offsets and the residual's taps
-        return keys + (("brdf", "lr_brdf") if self.upsampler is not None and self.upsampler.tap_brdf else ())
+        upsampler = self.upsampler.upsample_inputs if self.upsampler is not None else ()
+        return tuple(dict.fromkeys((*keys, *upsampler, "lr_jitter")))
 
     def _to_input(self, x: Tensor) -> Tensor:
         return to_log(x) if self.input_log else x
@@ -454,7 +444,7 @@ class WDSSNet(SuperResolutionNet):
             parts.append(self.temporal_branch(F.pixel_unshuffle(_pad(t_in, pad_hr), 2)))
         fusion = self.fusion(torch.cat(parts, 1))
         inr = self.inr(lr_inr, gb_inr, scale, (height, width), lr.shape[-2:], lr_cell, lr_jitter)
-        merged = torch.cat([fusion, inr], 1) if self.head == "fusion_ll" else fusion + inr
+        merged = self.head.merge(fusion, inr)
         base = None if upsampled is None else _pad(self._to_space(upsampled), pad_hr)
         coefficients: Tensor | None
         if self.transform == "none":
@@ -519,14 +509,9 @@ class WDSSNet(SuperResolutionNet):
         lr_jitter: Tensor | None = None,
     ) -> Tensor | None:
         """The upsampled LR irradiance the head adds to (linear, HR size), or None without a residual."""
-        if self.residual == "none":
+        if self.upsampler is None:
             return None
-        if self.residual == "bilinear":
-            return upsample(lr.float(), gbuffer.shape[-2:], "bilinear", lr_jitter)
-        if self.upsampler is not None:
-            return self.upsampler.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide, lr_jitter)
-        # the guide in lr's dtype
-        return joint_bilateral_upsample(lr.float(), gbuffer.float(), lr_guide=lr_guide, lr_jitter=lr_jitter)
+        return self.upsampler.upsample(lr, gbuffer, brdf, lr_brdf, lr_guide, lr_jitter)
 
     def target_coefficients(self, irradiance: Tensor) -> Tensor | None:
         """The analysis of a target irradiance ``(N, 3, H, W)`` in the space and layout of the predicted
