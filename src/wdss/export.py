@@ -310,6 +310,43 @@ def input_layout(
     opset: int,
 ) -> dict[str, Any]:
     """The sidecar of an exported graph: what an engine must feed it, channel by channel."""
+    inputs = _input_records(graph, height, width, scale, dynamic, dtype)
+    net = graph.net
+    return {
+        "format": "onnx",
+        "opset": opset,
+        "dtype": dtype,
+        "layout": "NCHW, batch of 1",
+        # wdss's networks take a per-frame jitter in torch (the batch key lr_jitter); a graph does not (yet).
+        "lr_sampling": "LR pixels shaded at their centres (no jitter input): render the LR frame unjittered",
+        "size": _size_record(height, width, scale, dynamic),
+        "inputs": inputs,
+        "outputs": [
+            {
+                "name": "color",
+                "channels": list(_RGB),
+                "description": "HR linear HDR colour = irradiance * brdf"
+                + (" (add the HR emission: the graph does not take it)" if prep.separates_emission else ""),
+            },
+            {"name": "irradiance", "channels": list(_RGB), "description": "HR demodulated prediction"},
+        ],
+        "preprocessing": _preprocessing_record(prep),
+        # The graph applies log1p to lr and history itself: feed linear values.
+        "log1p_inside": bool(net.input_log),
+        "exposure": _exposure_rule(),
+        "display": {"tonemap": module.hparams.tonemap_name, "exposure": module.hparams.tonemap_exposure},
+        "history": _history_rule(module, graph),
+        # Frame after frame: what the history is, on the first frame too, and what it was in training.
+        "temporal": _temporal(module, graph, prep),
+        "motion_vectors": MOTION_VECTORS if {"history", "motion"} & set(graph.inputs) else None,
+        "rir_folded": any(isinstance(m, RIRBlock) for m in net.modules()),
+    }
+
+
+def _input_records(
+    graph: InferenceGraph, height: int, width: int, scale: float, dynamic: bool, dtype: str
+) -> list[dict[str, Any]]:
+    """Each graph input's name, shape, dtype, resolution and channels (the sidecar's ``inputs``)."""
     lr_height, lr_width = lr_size(height, width, scale)
     sizes = {
         "high": ["2*half_height", "2*half_width"] if dynamic else [height, width],
@@ -332,100 +369,93 @@ def input_layout(
                 "description": description,
             }
         )
-    # The renderer's exposure rule, stated from its constants (imported here: wdss.render loads its whole package)
-    from wdss.render.exposure import MAX_DARKENING, SATURATED_SHARE, SATURATION
+    return inputs
 
-    net = graph.net
-    recurrent = module.temporal == "recurrent"
+
+def _size_record(height: int, width: int, scale: float, dynamic: bool) -> dict[str, Any]:
+    """The output and LR sizes the graph runs at (the sidecar's ``size``)."""
+    lr_height, lr_width = lr_size(height, width, scale)
+    return {
+        "dynamic": dynamic,
+        # dynamic: any size whose HR and LR heights and widths are even (the graph holds the even branch)
+        "height": None if dynamic else height,
+        "width": None if dynamic else width,
+        "lr_height": None if dynamic else lr_height,
+        "lr_width": None if dynamic else lr_width,
+        "lr_size": "h = round(H / s), w = round(W / s)",
+    }
+
+
+def _preprocessing_record(prep: Preprocessing) -> dict[str, Any]:
+    """How the engine's buffers become the graph's inputs: demodulation, the BRDF factor, depth, normals, colour
+    clipping and the spatial mask (the sidecar's ``preprocessing``)."""
     thresholds = prep.spatial_thresholds
     return {
-        "format": "onnx",
-        "opset": opset,
-        "dtype": dtype,
-        "layout": "NCHW, batch of 1",
-        # wdss's networks take a per-frame jitter in torch (the batch key lr_jitter); a graph does not (yet).
-        "lr_sampling": "LR pixels shaded at their centres (no jitter input): render the LR frame unjittered",
-        "size": {
-            "dynamic": dynamic,
-            # dynamic: any size whose HR and LR heights and widths are even (the graph holds the even branch)
-            "height": None if dynamic else height,
-            "width": None if dynamic else width,
-            "lr_height": None if dynamic else lr_height,
-            "lr_width": None if dynamic else lr_width,
-            "lr_size": "h = round(H / s), w = round(W / s)",
-        },
-        "inputs": inputs,
-        "outputs": [
-            {
-                "name": "color",
-                "channels": list(_RGB),
-                "description": "HR linear HDR colour = irradiance * brdf"
-                + (" (add the HR emission: the graph does not take it)" if prep.separates_emission else ""),
-            },
-            {"name": "irradiance", "channels": list(_RGB), "description": "HR demodulated prediction"},
-        ],
-        "preprocessing": {
-            "demodulate": prep.demodulate,
-            # Emitted radiance subtracted from the colour before demodulation (lr, history) and added to the output
-            "emission_separated": prep.separates_emission,
-            "brdf": {
-                "extranet": "F = base_color + (1 - metallic) * 0.08 * specular",
-                "split_sum": "F = base (1 - metallic) + F0 A + B, (A, B) = wdss.ops.brdf.ggx_lut(NoV, roughness)",
-            }[prep.brdf],
-            "brdf_name": prep.brdf,
-            # The factor divided by (lr, history) and multiplied by (brdf): safe_brdf(F, knee)
-            "brdf_knee": prep.brdf_knee,
-            "brdf_factor": (
-                f"F + (1 - F) exp(-(F / {prep.brdf_knee:g})^2)"
-                if prep.brdf_knee > 0
-                else "F, or 1 where F <= 1e-4 (or not finite)"
-            ),
-            "depth_far": prep.depth_far,  # depth beyond it is set to 0 (background)
-            "depth_normalize": prep.depth_normalize,  # per frame (min, max) -> (0, 1); LR by its HR frame's range
-            "depth": _depth_rule(prep),
-            "normals": "unit length, world space",
-            "color_max": prep.color_max,  # colour clipped to [0, color_max] before anything else, when set
-            "spatial_thresholds": dict(prep.spatial_thresholds),
-            "spatial_mask": (
-                f"1 where |depth - up(depth_lr)| > {thresholds['depth']:g} or n . normalize(up(n_lr)) < "
-                f"{thresholds['normal']:g} or the mean over r, g, b of |base_color - up(base_color_lr)| > "
-                f"{thresholds['albedo']:g}, else 0 (wdss.ops.warp.spatial_mask): the HR G-buffer against the LR "
-                "frame's own (lr_guide's channels), up = bilinear upsampling to the HR size (pixel centres aligned, "
-                "align_corners=False, border values beyond), depths preprocessed as depth says"
-            ),
-            "lr_brdf": (
-                "the factor lr was divided by: brdf_factor of F computed as brdf says from the LR frame's own "
-                "buffers (a native LR render's G-buffer; in wdss's point-sampled data the HR buffers at the LR pixel "
-                "centres, nearest-exact, where it equals the HR brdf point-sampled), not the HR brdf resampled"
-            ),
-        },
-        # The graph applies log1p to lr and history itself: feed linear values.
-        "log1p_inside": bool(net.input_log),
-        "exposure": (
-            "colour (and emission) is linear radiance pre-exposed as the training frames were: wdss's renders "
-            "multiply every frame of a sequence, at every resolution, by one factor that brings the median Rec. 709 "
-            f"luminance of lit pixels to {MIDDLE_GREY:g} (lower where more than {SATURATED_SHARE:.0%} of the values "
-            f"would exceed {SATURATION:g}, never below {MAX_DARKENING:g} x that median; wdss.render.exposure). "
-            "Multiply the engine's pre-tonemap colour and emission by its exposure before demodulating; the outputs "
-            "are in that exposed space"
+        "demodulate": prep.demodulate,
+        # Emitted radiance subtracted from the colour before demodulation (lr, history) and added to the output
+        "emission_separated": prep.separates_emission,
+        "brdf": {
+            "extranet": "F = base_color + (1 - metallic) * 0.08 * specular",
+            "split_sum": "F = base (1 - metallic) + F0 A + B, (A, B) = wdss.ops.brdf.ggx_lut(NoV, roughness)",
+        }[prep.brdf],
+        "brdf_name": prep.brdf,
+        # The factor divided by (lr, history) and multiplied by (brdf): safe_brdf(F, knee)
+        "brdf_knee": prep.brdf_knee,
+        "brdf_factor": (
+            f"F + (1 - F) exp(-(F / {prep.brdf_knee:g})^2)"
+            if prep.brdf_knee > 0
+            else "F, or 1 where F <= 1e-4 (or not finite)"
         ),
-        "display": {"tonemap": module.hparams.tonemap_name, "exposure": module.hparams.tonemap_exposure},
-        "history": (
+        "depth_far": prep.depth_far,  # depth beyond it is set to 0 (background)
+        "depth_normalize": prep.depth_normalize,  # per frame (min, max) -> (0, 1); LR by its HR frame's range
+        "depth": _depth_rule(prep),
+        "normals": "unit length, world space",
+        "color_max": prep.color_max,  # colour clipped to [0, color_max] before anything else, when set
+        "spatial_thresholds": dict(prep.spatial_thresholds),
+        "spatial_mask": (
+            f"1 where |depth - up(depth_lr)| > {thresholds['depth']:g} or n . normalize(up(n_lr)) < "
+            f"{thresholds['normal']:g} or the mean over r, g, b of |base_color - up(base_color_lr)| > "
+            f"{thresholds['albedo']:g}, else 0 (wdss.ops.warp.spatial_mask): the HR G-buffer against the LR "
+            "frame's own (lr_guide's channels), up = bilinear upsampling to the HR size (pixel centres aligned, "
+            "align_corners=False, border values beyond), depths preprocessed as depth says"
+        ),
+        "lr_brdf": (
+            "the factor lr was divided by: brdf_factor of F computed as brdf says from the LR frame's own "
+            "buffers (a native LR render's G-buffer; in wdss's point-sampled data the HR buffers at the LR pixel "
+            "centres, nearest-exact, where it equals the HR brdf point-sampled), not the HR brdf resampled"
+        ),
+    }
+
+
+def _exposure_rule() -> str:
+    """The renderer's exposure rule, stated from its constants (the sidecar's ``exposure``)."""
+    from wdss.render.exposure import MAX_DARKENING, SATURATED_SHARE, SATURATION  # here: wdss.render loads its package
+
+    return (
+        "colour (and emission) is linear radiance pre-exposed as the training frames were: wdss's renders "
+        "multiply every frame of a sequence, at every resolution, by one factor that brings the median Rec. 709 "
+        f"luminance of lit pixels to {MIDDLE_GREY:g} (lower where more than {SATURATED_SHARE:.0%} of the values "
+        f"would exceed {SATURATION:g}, never below {MAX_DARKENING:g} x that median; wdss.render.exposure). "
+        "Multiply the engine's pre-tonemap colour and emission by its exposure before demodulating; the outputs "
+        "are in that exposed space"
+    )
+
+
+def _history_rule(module: SuperResolutionModule, graph: InferenceGraph) -> str | None:
+    """What the graph's history input is, on the first frame too (None: it takes none; the sidecar's ``history``)."""
+    if module.temporal == "recurrent":
+        return (
             "recurrent: the previous frame's irradiance output warped by this frame's motion vectors "
             "(wdss.ops.warp.warp_backward: bilinear, zeros outside); on the first frame, lr upsampled bilinearly "
             "(align_corners=False)"
-            if recurrent
-            else "the previous HR frame's irradiance, warped by the motion vectors: trained on the ground-truth "
+        )
+    if "history" in graph.inputs:
+        return (
+            "the previous HR frame's irradiance, warped by the motion vectors: trained on the ground-truth "
             "frame's, fed its own irradiance output by an engine; on the first frame, lr upsampled bilinearly "
             "(align_corners=False); see temporal"
-            if "history" in graph.inputs
-            else None
-        ),
-        # Frame after frame: what the history is, on the first frame too, and what it was in training.
-        "temporal": _temporal(module, graph, prep),
-        "motion_vectors": MOTION_VECTORS if {"history", "motion"} & set(graph.inputs) else None,
-        "rir_folded": any(isinstance(m, RIRBlock) for m in net.modules()),
-    }
+        )
+    return None
 
 
 def check_size(height: int, width: int, scale: float, dynamic: bool) -> None:

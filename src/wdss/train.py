@@ -80,18 +80,37 @@ def _check_numbers(cfg: DictConfig) -> None:
 
 def validate(cfg: DictConfig) -> None:
     """Reject invalid combinations with one clear sentence each."""
-    choices = HydraConfig.get().runtime.choices if HydraConfig.initialized() else {}
-    # A config builds only allowlisted callables (wdss.config.targets): a config file is not a way to run code.
+    _check_allowlisted(cfg)
+    _check_numbers(cfg)
+    _check_head(cfg)
+    _check_scales(cfg)
+    _check_wavelet_loss(cfg)
+    _check_sampler(cfg)
+    _check_temporal_loss(cfg)
+    _check_ckpt_path(cfg)
+    # transform=none with a basis other than db4 is not an error: the basis is ignored and tagged "n/a"
+    # (see wdss.tracking.run_tags).
+
+
+def _check_allowlisted(cfg: DictConfig) -> None:
+    """A config builds only allowlisted callables (wdss.config.targets): a config file is not a way to run code."""
     try:
         check_targets(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"]))
     except TargetRefused as err:
         raise ConfigError(str(err)) from err
-    _check_numbers(cfg)
+
+
+def _check_head(cfg: DictConfig) -> None:
+    """A head that predicts wavelet subbands needs a wavelet transform (baselines have no head)."""
     transform = OmegaConf.select(cfg, "transform.transform")
     # The head the network builds (conf/head, allowlisted above; none for a baseline) says whether it needs subbands.
     head = resolve(str(OmegaConf.select(cfg, "model.net.head._target_", default="")))
     if transform == "none" and isinstance(head, type) and issubclass(head, Head) and head.needs_subbands:
         raise ConfigError(f"head={head.name} needs wavelet subbands: it cannot be combined with transform=none")
+
+
+def _check_scales(cfg: DictConfig) -> None:
+    """The training scale has the shape its ``scale`` option takes; the test scales lie in [1, 8]."""
     scale = OmegaConf.select(cfg, "scale.train")
     scale_name = OmegaConf.select(cfg, "scale.name")
     if scale_name == "fixed" and OmegaConf.is_list(scale):
@@ -103,6 +122,10 @@ def validate(cfg: DictConfig) -> None:
     for value in OmegaConf.to_container(cfg.data, resolve=True).get("test_scales", []):
         if not 1.0 <= float(value) <= 8.0:
             raise ConfigError(f"data.test_scales must lie in [1, 8], got {value}")
+
+
+def _check_wavelet_loss(cfg: DictConfig) -> None:
+    """A wavelet loss term in a non-linear loss space needs subbands predicted in log space."""
     space, wavelet_weight = (
         OmegaConf.select(cfg, "loss.space"),
         OmegaConf.select(cfg, "loss.weights.wavelet", default=0),
@@ -115,6 +138,10 @@ def validate(cfg: DictConfig) -> None:
             "subbands (LL up to ~100x the image terms): set model.net.output_space=log (the head then predicts "
             "log1p-irradiance subbands) or loss.weights.wavelet=0"
         )
+
+
+def _check_sampler(cfg: DictConfig) -> None:
+    """Lightning's distributed sampler is off: wdss's EpochSampler shares an epoch out itself."""
     if OmegaConf.select(cfg, "trainer") is not None and OmegaConf.select(
         cfg, "trainer.use_distributed_sampler", default=True
     ):
@@ -122,9 +149,18 @@ def validate(cfg: DictConfig) -> None:
             "trainer.use_distributed_sampler must be false: under DDP wdss's EpochSampler gives each rank its share "
             "of an epoch, and Lightning's sampler would share the shares out again"
         )
+
+
+def _check_temporal_loss(cfg: DictConfig) -> None:
+    """A temporal loss term needs consecutive outputs of a recurrent model."""
     temporal = OmegaConf.select(cfg, "temporal.name")
     if temporal != "recurrent" and OmegaConf.select(cfg, "loss.weights.temporal", default=0):
         raise ConfigError("loss.weights.temporal > 0 needs temporal=recurrent (consecutive outputs of the model)")
+
+
+def _check_ckpt_path(cfg: DictConfig) -> None:
+    """``ckpt_path``, unless ``last`` or unset, is a wdss checkpoint whose model config builds only allowlisted
+    callables."""
     if cfg.get("ckpt_path") not in (None, "last"):
         if not Path(str(cfg.ckpt_path)).is_file():
             raise ConfigError(f"ckpt_path {cfg.ckpt_path} is not a file (use a checkpoint path or 'last')")
@@ -132,8 +168,6 @@ def validate(cfg: DictConfig) -> None:
             read_checkpoint(str(cfg.ckpt_path))
         except CheckpointError as err:
             raise ConfigError(f"ckpt_path: {err}") from err
-    if choices.get("transform") == "none" and choices.get("basis") not in (None, "db4"):
-        pass  # the basis is ignored and tagged "n/a" (see wdss.tracking.run_tags), not an error
 
 
 RUN_KEY_FILE = "run_key"  # in a run's output directory: what ckpt_path=last matches (wdss.tracking.run_key)
@@ -524,7 +558,7 @@ class ValidateBeforeRun(Callback):
     config leaves nothing behind (sweeps validate each job in :func:`train`, after their folders exist)."""
 
     def on_run_start(self, config: DictConfig, **_: Any) -> None:
-        HydraConfig.instance().set_config(config)  # choices for validate(); Hydra sets it again for the job
+        HydraConfig.instance().set_config(config)  # validate() runs as in the job; Hydra sets it again for the job
         task = OmegaConf.masked_copy(config, [k for k in config if k != "hydra"])
         try:
             validate(task)

@@ -51,6 +51,7 @@ from wdss.data.dataset import Collate, FrameDataset, Preprocessing, ScaleSpec, p
 from wdss.data.exr import ExrError, read_exr, write_exr
 from wdss.data.layouts import SceneError, Sequence
 from wdss.data.preprocess import prediction_color, target_irradiance
+from wdss.nets.base import SuperResolutionNet
 from wdss.nets.blocks import fold_rir_blocks
 from wdss.nets.upsamplers.baselines import Upsample
 from wdss.paths import CONF_DIR
@@ -214,32 +215,78 @@ def _describe(values: dict[str, float]) -> str:
 
 def upscale(cfg: DictConfig) -> dict[str, float]:
     """Upscale ``cfg.input`` with the model of ``cfg.ckpt_path``; the mean metrics (empty without a target)."""
+    dtype = _precision(cfg)
+    ckpt = Path(str(cfg.ckpt_path))
+    read_checkpoint(ckpt)  # a wdss checkpoint whose model config builds only allowlisted callables
+    device = torch.device(str(cfg.device))
+    module = _load_model(ckpt, device)
+    seq = Sequence(str(cfg.input), str(cfg.layout))
+    scale = float(cfg.scale)
+    warning = _check_scale(module.net, scale, ckpt)
+    inputs = _model_inputs(cfg, module, seq, scale, ckpt)
+    out_dir = Path(str(cfg.output or Path(str(cfg.paths.log_dir)) / "upscale" / f"{seq.name}_{scale:g}x"))
+    check_output(out_dir, seq.source.path)
+    record = _open_record(out_dir, ckpt, inputs, scale, str(cfg.precision), warning)
+    run = _Upscaler(module, inputs, out_dir, record, bool(cfg.compare), str(cfg.on_error), device, dtype)
+    done = run.announce(ckpt, scale)
+    run.frames(done, f"upscale {seq.name} {scale:g}x")
+    frames = [f for _, f in inputs.dataset.items]
+    if cfg.video:
+        _video(out_dir, seq, scale, [run.files(f)[-1] for f in frames if run.complete(f)], cfg.fps)
+    return _summary(record, seq, scale, out_dir, frames)
+
+
+def _precision(cfg: DictConfig) -> torch.dtype:
+    """The network's precision (``precision``), with ``on_error`` checked first."""
     if cfg.on_error not in ("stop", "skip"):
         raise UpscaleError(f"on_error must be stop or skip, got {cfg.on_error!r}")
     if str(cfg.precision) not in PRECISIONS:
         raise UpscaleError(f"precision must be one of {', '.join(PRECISIONS)}, got {cfg.precision!r}")
-    dtype = PRECISIONS[str(cfg.precision)]
-    ckpt = Path(str(cfg.ckpt_path))
-    read_checkpoint(ckpt)  # a wdss checkpoint whose model config builds only allowlisted callables
-    device = torch.device(str(cfg.device))
+    return PRECISIONS[str(cfg.precision)]
+
+
+def _load_model(ckpt: Path, device: torch.device) -> SuperResolutionModule:
+    """The checkpoint's module in eval mode on ``device``, as engines run it (wdss.bench inference): RIR blocks
+    folded, and channels-last: oneDNN's convolutions skip their reorders and an SWT head computes its tail on cells."""
     module = SuperResolutionModule.load_from_checkpoint(ckpt, map_location=device, weights_only=True).eval()
-    # As engines run it (wdss.bench inference): RIR blocks folded, and channels-last: oneDNN's convolutions skip their
-    # reorders and an SWT head computes its tail on cells.
     fold_rir_blocks(module.net)
-    module = module.to(memory_format=torch.channels_last)
-    seq = Sequence(str(cfg.input), str(cfg.layout))
-    scale = float(cfg.scale)
-    net = module.net
+    return module.to(memory_format=torch.channels_last)
+
+
+def _check_scale(net: SuperResolutionNet, scale: float, ckpt: Path) -> str | None:
+    """Refuse a scale a fixed-scale network cannot upsample by; warn (on stderr) of one outside those the model was
+    trained at, and return that warning."""
     if net.fixed_scale and scale != float(net.scale):
         raise UpscaleError(f"the model ({net.__class__.__name__}) upsamples by {net.scale} only, not by {scale:g}")
     warning = scale_warning(scale, trained_scales(ckpt))
     if warning:
         print(f"wdss.upscale: WARNING: {warning}", file=sys.stderr, flush=True)
+    return warning
+
+
+@dataclasses.dataclass
+class _Inputs:
+    """The input's frames as the model is fed them, and what they hold."""
+
+    seq: Sequence
+    dataset: FrameDataset
+    collate: Collate
+    prep: Preprocessing
+    overrides: dict  # of the training run's preprocessing (``preprocessing``)
+    keys: set[str]  # the batch keys read
+    has_target: bool  # metrics against the input's HR colour
+    shows_target: bool  # the HR colour read: for the metrics, or shown beside them
+    feed_back: bool  # the history is the model's own previous output
+
+
+def _model_inputs(cfg: DictConfig, module: SuperResolutionModule, seq: Sequence, scale: float, ckpt: Path) -> _Inputs:
+    """The dataset of the frames to upscale (``frames``), reading only the buffers the model needs (and ``compare``
+    shows), preprocessed as in training (with ``preprocessing``'s overrides)."""
     overrides = OmegaConf.to_container(cfg.preprocessing, resolve=True) if cfg.get("preprocessing") else {}
     prep = Preprocessing(**{**training_preprocessing(ckpt), **overrides})
     hr_color = seq.has("color", seq.hr)
     has_target = bool(cfg.metrics) and hr_color
-    shows_target = hr_color and bool(cfg.metrics or cfg.compare)  # read: for the metrics, or shown beside them
+    shows_target = hr_color and bool(cfg.metrics or cfg.compare)
     # The history a temporal model gets: its own previous output (recurrent; also a gt_history model on frames
     # without HR colour, as an engine runs it), or the previous HR frame read from the input (gt_history).
     feed_back = module.temporal == "recurrent" or (module.temporal == "gt_history" and not hr_color)
@@ -255,108 +302,177 @@ def upscale(cfg: DictConfig) -> dict[str, float]:
         [seq], sorted(keys), scale=scale, patch=None, preprocessing=prep, first_frame="zeros", frame_ranges=frames
     )
     collate = Collate(dataset.keys, prep, scale)
-    out_dir = Path(str(cfg.output or Path(str(cfg.paths.log_dir)) / "upscale" / f"{seq.name}_{scale:g}x"))
-    check_output(out_dir, seq.source.path)
+    return _Inputs(seq, dataset, collate, prep, overrides, keys, has_target, shows_target, feed_back)
+
+
+def _open_record(
+    out_dir: Path, ckpt: Path, inputs: _Inputs, scale: float, precision: str, warning: str | None
+) -> Record:
+    """The output folder's record (refused when another upscale made the folder), its warnings saved at once."""
     record = Record(
         out_dir,
         {
             "checkpoint_sha256": _digest(ckpt),
-            "input": str(seq.source.path.resolve()),
+            "input": str(inputs.seq.source.path.resolve()),
             "scale": scale,
-            "precision": str(cfg.precision),
+            "precision": precision,
             # Everything that changes a frame is part of the folder's identity: a rerun with other preprocessing
             # is refused rather than mixed in (folders from before this was recorded: as made without overrides).
-            "preprocessing": json.loads(json.dumps(dataclasses.asdict(prep), default=str)),
+            "preprocessing": json.loads(json.dumps(dataclasses.asdict(inputs.prep), default=str)),
         },
-        unrecorded={"preprocessing": None if overrides else "as trained"},
+        unrecorded={"preprocessing": None if inputs.overrides else "as trained"},
     )
     record.warnings = [warning] if warning else []
     if record.warnings:  # recorded even when every frame is already done
         record.save()
-    baseline = Upsample("bilinear", demodulated=True)
+    return record
 
-    def files(frame: int) -> list[Path]:
+
+class _Upscaler:
+    """The frame loop of one upscale: each frame not done yet read, fed its history, run and written, in order."""
+
+    def __init__(
+        self,
+        module: SuperResolutionModule,
+        inputs: _Inputs,
+        out_dir: Path,
+        record: Record,
+        compare: bool,
+        on_error: str,
+        device: torch.device,
+        dtype: torch.dtype,
+    ) -> None:
+        self.module, self.inputs, self.out_dir, self.record = module, inputs, out_dir, record
+        self.compare, self.on_error, self.device, self.dtype = compare, on_error, device, dtype
+        self.baseline = Upsample("bilinear", demodulated=True)
+
+    def files(self, frame: int) -> list[Path]:
         """A frame's outputs, the EXR (written last) first."""
-        paths = [out_dir / output_name(seq, frame), out_dir / "png" / f"{frame:04d}.png"]
-        return paths + ([out_dir / "compare" / f"{frame:04d}.png"] if cfg.compare else [])
+        paths = [self.out_dir / output_name(self.inputs.seq, frame), self.out_dir / "png" / f"{frame:04d}.png"]
+        return paths + ([self.out_dir / "compare" / f"{frame:04d}.png"] if self.compare else [])
 
-    def complete(frame: int) -> bool:
+    def complete(self, frame: int) -> bool:
         try:
-            written = all(p.exists() for p in files(frame))
+            written = all(p.exists() for p in self.files(frame))
         except SceneError:  # no colour at any resolution: the frame fails to read
             return False
-        return written and (not has_target or str(frame) in record.frames)
+        return written and (not self.inputs.has_target or str(frame) in self.record.frames)
 
-    def read_back(index: int) -> Tensor | None:
-        """The irradiance a finished frame fed forward: its EXR colour less its emission, over its BRDF factor."""
+    def announce(self, ckpt: Path, scale: float) -> list[int]:
+        """Print what the run does, and return the frames already done (a rerun resumes)."""
+        inputs = self.inputs
+        seq, dataset = inputs.seq, inputs.dataset
+        lr_height = dataset.native_lr(seq)
+        done = [frame for _, frame in dataset.items if self.complete(frame)]
+        lr = f"from the native {lr_height}P folder" if lr_height else f"point-sampled from {seq.hr}P"
+        history = (
+            "fed back from the output" if inputs.feed_back else "from the input" if "history" in inputs.keys else "none"
+        )
+        target = (
+            "metrics against the HR colour"
+            if inputs.has_target
+            else "target shown"
+            if inputs.shows_target
+            else "no target"
+        )
+        print(
+            f"wdss.upscale: {seq.name} ({seq.layout.name} layout, {len(dataset)} frames) at {scale:g}x with {ckpt}: "
+            f"LR {lr}, history {history}, {target} -> {self.out_dir}",
+            flush=True,
+        )
+        if done:
+            print(f"  {len(done)} of {len(dataset)} frames already done in {self.out_dir}: resuming", flush=True)
+        return done
+
+    def frames(self, done: list[int], label: str) -> None:
+        """Upscale every frame not in ``done``, in order."""
+        dataset = self.inputs.dataset
+        previous: tuple[int, Tensor] | None = None  # (frame, irradiance) of the last frame computed
+        with Progress(label, len(dataset)) as progress:
+            for index, (_, frame) in enumerate(dataset.items):
+                if frame in done:
+                    progress.advance(text=None)
+                    continue
+                batch = self._read(index, frame, progress)
+                if batch is None:
+                    continue
+                if self.inputs.feed_back:
+                    history, previous = self._history(index, frame, done, previous)
+                    batch = self.module._with_history(batch, history)
+                out = self._predict(batch)
+                text = self._write(frame, batch, out["color"])
+                previous = (frame, out["irradiance"].float())  # warped in float32 into the next frame's history
+                progress.advance(text=text)
+
+    def _read(self, index: int, frame: int, progress: Progress) -> dict[str, Any] | None:
+        """The frame's batch on the device, or None for a frame that cannot be read with ``on_error=skip`` (recorded
+        and reported)."""
         try:
-            batch = collate([dataset[index]])
+            batch = self.inputs.collate([self.inputs.dataset[index]])
+        except _READ_ERRORS as err:
+            if self.on_error == "stop":
+                raise UpscaleError(f"frame {frame} cannot be read: {err} (on_error=skip goes on)") from err
+            self.record.skipped[str(frame)] = str(err)
+            self.record.save()
+            progress.advance(text=f"frame {frame:04d} SKIPPED, it cannot be read: {err}")
+            return None
+        return {k: _to(v, self.device) for k, v in batch.items()}
+
+    def _history(
+        self, index: int, frame: int, done: list[int], previous: tuple[int, Tensor] | None
+    ) -> tuple[Tensor | None, tuple[int, Tensor] | None]:
+        """The irradiance fed back into ``frame`` (None: the first frame, or the one before could not be read) and
+        the ``previous`` it came from: the last frame computed, or the one before read back from its files when that
+        was done by an earlier run."""
+        items = self.inputs.dataset.items
+        if (previous is None or previous[0] != frame - 1) and index and items[index - 1][1] in done:
+            fed = self._read_back(index - 1)
+            previous = (frame - 1, fed) if fed is not None else None
+        history = previous[1] if previous is not None and previous[0] == frame - 1 else None
+        return history, previous
+
+    def _read_back(self, index: int) -> Tensor | None:
+        """The irradiance a finished frame fed forward: its EXR colour less its emission, over its BRDF factor."""
+        dataset = self.inputs.dataset
+        try:
+            batch = self.inputs.collate([dataset[index]])
             frame = dataset.items[index][1]
-            planes = read_exr(files(frame)[0], seq.layout.SLOTS["color"].channels)
+            planes = read_exr(self.files(frame)[0], self.inputs.seq.layout.SLOTS["color"].channels)
         except _READ_ERRORS:
             return None
-        color = torch.from_numpy(np.stack(list(planes.values())))[None].to(device)
-        known = {k: batch[k].to(device) for k in ("brdf", "emission") if k in batch}
+        color = torch.from_numpy(np.stack(list(planes.values())))[None].to(self.device)
+        known = {k: batch[k].to(self.device) for k in ("brdf", "emission") if k in batch}
         return target_irradiance({"target": color, **known})
 
-    lr_height = dataset.native_lr(seq)
-    done = [frame for _, frame in dataset.items if complete(frame)]
-    print(
-        f"wdss.upscale: {seq.name} ({seq.layout.name} layout, {len(dataset)} frames) at {scale:g}x with {ckpt}: "
-        f"LR {f'from the native {lr_height}P folder' if lr_height else f'point-sampled from {seq.hr}P'}, "
-        f"history {'fed back from the output' if feed_back else 'from the input' if 'history' in keys else 'none'}, "
-        f"{'metrics against the HR colour' if has_target else 'target shown' if shows_target else 'no target'}"
-        f" -> {out_dir}",
-        flush=True,
-    )
-    if done:
-        print(f"  {len(done)} of {len(dataset)} frames already done in {out_dir}: resuming", flush=True)
-    previous: tuple[int, Tensor] | None = None  # (frame, irradiance) of the last frame computed
-    with Progress(f"upscale {seq.name} {scale:g}x", len(dataset)) as progress:
-        for index, (_, frame) in enumerate(dataset.items):
-            if frame in done:
-                progress.advance(text=None)
-                continue
-            try:
-                batch = collate([dataset[index]])
-            except _READ_ERRORS as err:
-                if cfg.on_error == "stop":
-                    raise UpscaleError(f"frame {frame} cannot be read: {err} (on_error=skip goes on)") from err
-                record.skipped[str(frame)] = str(err)
-                record.save()
-                progress.advance(text=f"frame {frame:04d} SKIPPED, it cannot be read: {err}")
-                continue
-            batch = {k: _to(v, device) for k, v in batch.items()}
-            if feed_back:
-                if (previous is None or previous[0] != frame - 1) and index and dataset.items[index - 1][1] in done:
-                    fed = read_back(index - 1)
-                    previous = (frame - 1, fed) if fed is not None else None
-                history = previous[1] if previous is not None and previous[0] == frame - 1 else None
-                batch = module._with_history(batch, history)
-            with torch.inference_mode(), torch.autocast(device.type, dtype, enabled=dtype != torch.float32):
-                out = module(batch, subbands=False)
-            color = out.get("color")
-            if color is None:
-                raise UpscaleError(f"{net.__class__.__name__} outputs a display image, no linear HDR colour to write")
-            reference = batch.get("target", color)  # the display exposure, when it is "auto"
-            _save_png(files(frame)[1], _to_uint8(module.tone(color.float(), reference.float())))
-            if cfg.compare:
-                base = prediction_color(baseline(brdf=batch["brdf"], lr=batch["lr"])["irradiance"], batch)
-                _save_png(files(frame)[2], _comparison(module, base, color, batch.get("target")))
-            text = f"frame {frame:04d}"
-            if has_target:
-                values = {k: float(v[0]) for k, v in module.metrics(color.float(), batch["target"].float()).items()}
-                record.frames[str(frame)] = values
-                text += f": {_describe(values)}"
-            record.skipped.pop(str(frame), None)
-            record.save()
-            channels = seq.layout.SLOTS["color"].channels
-            write_exr(files(frame)[0], dict(zip(channels, color[0].float().cpu().numpy(), strict=True)))
-            previous = (frame, out["irradiance"].float())  # warped in float32 into the next frame's history
-            progress.advance(text=text)
-    if cfg.video:
-        _video(out_dir, seq, scale, [files(f)[-1] for _, f in dataset.items if complete(f)], cfg.fps)
-    return _summary(record, seq, scale, out_dir, [f for _, f in dataset.items])
+    def _predict(self, batch: dict[str, Any]) -> dict[str, Tensor]:
+        """The network's outputs in ``precision``; one without a linear HDR colour is refused."""
+        with torch.inference_mode(), torch.autocast(self.device.type, self.dtype, enabled=self.dtype != torch.float32):
+            out = self.module(batch, subbands=False)
+        if out.get("color") is None:
+            raise UpscaleError(
+                f"{self.module.net.__class__.__name__} outputs a display image, no linear HDR colour to write"
+            )
+        return out
+
+    def _write(self, frame: int, batch: dict[str, Any], color: Tensor) -> str:
+        """Write the frame's pictures, its metrics into the record and its EXR (last: it marks the frame done);
+        returns its progress line."""
+        module, files = self.module, self.files(frame)
+        reference = batch.get("target", color)  # the display exposure, when it is "auto"
+        _save_png(files[1], _to_uint8(module.tone(color.float(), reference.float())))
+        if self.compare:
+            base = prediction_color(self.baseline(brdf=batch["brdf"], lr=batch["lr"])["irradiance"], batch)
+            _save_png(files[2], _comparison(module, base, color, batch.get("target")))
+        text = f"frame {frame:04d}"
+        if self.inputs.has_target:
+            values = {k: float(v[0]) for k, v in module.metrics(color.float(), batch["target"].float()).items()}
+            self.record.frames[str(frame)] = values
+            text += f": {_describe(values)}"
+        self.record.skipped.pop(str(frame), None)
+        self.record.save()
+        channels = self.inputs.seq.layout.SLOTS["color"].channels
+        write_exr(files[0], dict(zip(channels, color[0].float().cpu().numpy(), strict=True)))
+        return text
 
 
 def _comparison(module: SuperResolutionModule, base: Tensor, color: Tensor, target: Tensor | None) -> np.ndarray:

@@ -32,9 +32,10 @@ import json
 import os
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from collections.abc import Sequence as Seq
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -163,13 +164,43 @@ def pack_sequence(
 ) -> PackedSequence:
     """Pack (or finish packing) one sequence into ``folder``; ``verify`` frames per resolution (None: all) are then
     compared bit for bit with the source."""
+    level, tile = _codec_options(codec, level, tile)
+    folder = Path(folder)
+    wanted = _wanted_buffers(seq, buffers)
+    settings = {"buffers": wanted, "codec": codec, "level": level if codec != "none" else None, "tile": tile}
+    index = _open_index(seq, folder, settings)
+    index["complete"] = False
+    if seq.source.has("sequence.json"):
+        (folder / "sequence.json").write_bytes(seq.source.read_bytes("sequence.json"))
+    compress = _compressor(codec, level)
+    frames_at = {h: seq.frames_at(h) for h in seq.resolutions}
+    todo = sum(len(f) - len(index["resolutions"].get(str(h), {}).get("packed", {})) for h, f in frames_at.items())
+    with Progress(f"pack {seq.name}", todo, every_s=5.0, unit="frames") as progress:
+        for height in seq.resolutions:
+            present = [b for b in wanted if seq.has(b, height)]
+            if present:
+                frames = frames_at[height]
+                _pack_resolution(seq, folder, index, height, frames, present, tile, compress, depth_far, progress)
+    index["complete"] = True
+    _save(folder, index)
+    packed = PackedSequence(folder)
+    verify_sequence(seq, packed, verify)
+    return packed
+
+
+def _codec_options(codec: str, level: int | None, tile: int | None) -> tuple[int | None, int]:
+    """The compression level and tile size to pack with (their defaults for ``codec`` where not given), checked."""
     if codec not in CODECS:
         raise ValueError(f"codec must be one of {', '.join(CODECS)}, got {codec!r}")
     tile = (TILE if codec != "none" else 0) if tile is None else int(tile)
     level = LEVELS.get(codec) if level is None else int(level)
     if tile != 0 and tile < 8:
         raise ValueError(f"tile must be 0 (whole frames) or at least 8 pixels, got {tile}")
-    folder = Path(folder)
+    return level, tile
+
+
+def _wanted_buffers(seq: Sequence, buffers: Iterable[str] | None) -> list[str]:
+    """The buffers to pack (None: every one the sequence has at HR), each checked to exist at HR."""
     wanted = [b for b in BUFFERS if seq.has(b, seq.hr)] if buffers is None else list(dict.fromkeys(buffers))
     # An optional buffer a sequence lacks is packed as absent: reading treats it so (it emits nothing).
     wanted = [b for b in wanted if b not in OPTIONAL_BUFFERS or seq.has(b, seq.hr)]
@@ -178,119 +209,144 @@ def pack_sequence(
             raise SceneError(f"unknown buffer {buffer!r}: expected one of {', '.join(BUFFERS)}")
         if not seq.has(buffer, seq.hr):
             raise SceneError(f"sequence {seq.name!r} has no {buffer!r} buffer at {seq.hr}P to pack")
-    settings = {"buffers": wanted, "codec": codec, "level": level if codec != "none" else None, "tile": tile}
+    return wanted
+
+
+def _open_index(seq: Sequence, folder: Path, settings: dict) -> dict:
+    """The index of a packing to resume in ``folder`` (refused when made with other settings or from source files that
+    changed since), or a new one, the folder made."""
     source = seq.source.path.resolve()
     index_path = folder / INDEX
-    if index_path.is_file():
-        try:
-            index = json.loads(index_path.read_text())
-        except ValueError as err:
-            raise SceneError(f"{index_path} cannot be read ({err}): remove {folder} to pack it again") from err
-        before = {k: index.get(k) for k in settings}
-        if index.get("format") != FORMAT or index.get("version") != VERSION or before != settings:
-            raise SceneError(
-                f"{folder} holds a packing of {seq.name!r} with other settings ({before}, asked {settings}): remove "
-                "it or pack with the same settings"
-            )
-        recorded = {
-            n: m for r in index["resolutions"].values() for f in r["packed"].values() for n, m in f["sources"].items()
-        }
-        changed = changed_source(source, index.get("zip_prefix", ""), recorded)
-        if changed:
-            raise SceneError(
-                f"cannot resume packing {seq.name!r} into {folder}: {changed}; remove {folder} to pack it again"
-            )
-    else:
+    if not index_path.is_file():
         folder.mkdir(parents=True, exist_ok=True)
         index = {"format": FORMAT, "version": VERSION, "sequence": seq.name, "layout": seq.layout.name}
         index |= {"source": str(source), "zip_prefix": seq.source.prefix, **settings}
-        index |= {"exposure": _exposure(seq), "complete": False, "resolutions": {}}
-    index["complete"] = False
-    if seq.source.has("sequence.json"):
-        (folder / "sequence.json").write_bytes(seq.source.read_bytes("sequence.json"))
-    compress = None
+        return index | {"exposure": _exposure(seq), "complete": False, "resolutions": {}}
+    try:
+        index = json.loads(index_path.read_text())
+    except ValueError as err:
+        raise SceneError(f"{index_path} cannot be read ({err}): remove {folder} to pack it again") from err
+    before = {k: index.get(k) for k in settings}
+    if index.get("format") != FORMAT or index.get("version") != VERSION or before != settings:
+        raise SceneError(
+            f"{folder} holds a packing of {seq.name!r} with other settings ({before}, asked {settings}): remove "
+            "it or pack with the same settings"
+        )
+    recorded = {
+        n: m for r in index["resolutions"].values() for f in r["packed"].values() for n, m in f["sources"].items()
+    }
+    changed = changed_source(source, index.get("zip_prefix", ""), recorded)
+    if changed:
+        raise SceneError(
+            f"cannot resume packing {seq.name!r} into {folder}: {changed}; remove {folder} to pack it again"
+        )
+    return index
+
+
+def _compressor(codec: str, level: int | None) -> Callable[[bytes], bytes] | None:
+    """What compresses one chunk in ``codec`` at ``level`` (None: stored as it is)."""
     if codec == "zstd":
         import zstandard
 
-        compress = zstandard.ZstdCompressor(level=level, write_checksum=True, write_content_size=True).compress
-    elif codec == "lz4":
-        compress = functools.partial(lz4_encode, level=level)
-    frames_at = {h: seq.frames_at(h) for h in seq.resolutions}
-    todo = sum(len(f) - len(index["resolutions"].get(str(h), {}).get("packed", {})) for h, f in frames_at.items())
-    with Progress(f"pack {seq.name}", todo, every_s=5.0, unit="frames") as progress:
-        for height in seq.resolutions:
-            present = [b for b in wanted if seq.has(b, height)]
-            if not present:
+        return zstandard.ZstdCompressor(level=level, write_checksum=True, write_content_size=True).compress
+    if codec == "lz4":
+        return functools.partial(lz4_encode, level=level)
+    return None
+
+
+def _pack_resolution(
+    seq: Sequence,
+    folder: Path,
+    index: dict,
+    height: int,
+    frames: list[int],
+    present: list[str],
+    tile: int,
+    compress: Callable[[bytes], bytes] | None,
+    depth_far: float | None,
+    progress: Progress,
+) -> None:
+    """Append the frames of one resolution not packed yet to its file (after the last whole record: one cut short by
+    a kill is packed again), saving the index now and then and once done."""
+    res = index["resolutions"].setdefault(
+        str(height), {"file": f"{height}P.bin", "shape": None, "frames": frames, "buffers": {}, "packed": {}}
+    )
+    path = folder / res["file"]
+    end = max((r["offset"] + r["length"] for r in res["packed"].values()), default=0)
+    size = path.stat().st_size if path.exists() else 0
+    if size < end:
+        raise SceneError(
+            f"{path} is shorter than its index records ({size} < {end} bytes): remove {folder} to pack again"
+        )
+    saved = time.monotonic()
+    with open(path, "r+b" if path.exists() else "wb") as out:
+        out.truncate(end)  # a record cut short by a kill is packed again
+        out.seek(end)
+        for frame in frames:
+            if str(frame) in res["packed"]:
                 continue
-            res = index["resolutions"].setdefault(
-                str(height),
-                {"file": f"{height}P.bin", "shape": None, "frames": frames_at[height], "buffers": {}, "packed": {}},
-            )
-            path = folder / res["file"]
-            end = max((r["offset"] + r["length"] for r in res["packed"].values()), default=0)
-            size = path.stat().st_size if path.exists() else 0
-            if size < end:
-                raise SceneError(
-                    f"{path} is shorter than its index records ({size} < {end} bytes): remove {folder} to pack again"
-                )
-            saved = time.monotonic()
-            with open(path, "r+b" if path.exists() else "wb") as out:
-                out.truncate(end)  # a record cut short by a kill is packed again
-                out.seek(end)
-                for frame in frames_at[height]:
-                    if str(frame) in res["packed"]:
-                        continue
-                    arrays, sources, shape = _source_frame(seq, frame, height, present)
-                    if res["shape"] is None:
-                        res["shape"] = list(shape)
-                        for buffer in present:
-                            slot = seq.layout.SLOTS[buffer]
-                            res["buffers"][buffer] = {
-                                "dtype": arrays[buffer].dtype.name,
-                                "channels": [
-                                    f"{seq.file(buffer, height, frame).rsplit('/', 1)[-1].split('.')[0]}.{c}"
-                                    for c in slot.channels
-                                ],
-                            }
-                    elif list(shape) != res["shape"]:
-                        raise SceneError(
-                            f"sequence {seq.name!r}, frame {frame}: {height}P is {shape[1]}x{shape[0]}, the sequence's "
-                            f"first packed frame {res['shape'][1]}x{res['shape'][0]}"
-                        )
-                    for buffer in present:
-                        stored = np.dtype(res["buffers"][buffer]["dtype"])
-                        if arrays[buffer].dtype != stored:
-                            if stored == np.float16:
-                                raise SceneError(
-                                    f"sequence {seq.name!r}, frame {frame}: buffer {buffer!r} at {height}P is float, "
-                                    "earlier frames' is half: re-render the sequence with one precision per buffer"
-                                )
-                            arrays[buffer] = arrays[buffer].astype(stored)
-                    record = _encode(arrays, present, tile, compress)
-                    meta: dict = {"offset": end, "length": len(record), "sources": sources}
-                    meta["nonfinite"] = {
-                        b: int((~np.isfinite(a)).sum()) for b, a in arrays.items() if not np.isfinite(a).all()
-                    }
-                    if "depth" in arrays:
-                        depth = np.nan_to_num(arrays["depth"].astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-                        meta["depth_range"] = {far_key(f): list(depth_range(depth, f)) for f in {depth_far, None}}
-                    out.write(record)
-                    end += len(record)
-                    res["packed"][str(frame)] = meta
-                    progress.advance()
-                    if time.monotonic() - saved >= SAVE_EVERY_S:
-                        out.flush()
-                        os.fsync(out.fileno())
-                        _save(folder, index)
-                        saved = time.monotonic()
-                out.flush()
-                os.fsync(out.fileno())
-            _save(folder, index)
-    index["complete"] = True
+            arrays, sources, shape = _source_frame(seq, frame, height, present)
+            _fit_layout(seq, res, frame, height, present, arrays, shape)
+            record = _encode(arrays, present, tile, compress)
+            meta = _record_meta(arrays, sources, end, len(record), depth_far)
+            out.write(record)
+            end += len(record)
+            res["packed"][str(frame)] = meta
+            progress.advance()
+            if time.monotonic() - saved >= SAVE_EVERY_S:
+                _sync(out)
+                _save(folder, index)
+                saved = time.monotonic()
+        _sync(out)
     _save(folder, index)
-    packed = PackedSequence(folder)
-    verify_sequence(seq, packed, verify)
-    return packed
+
+
+def _fit_layout(
+    seq: Sequence, res: dict, frame: int, height: int, present: list[str], arrays: dict, shape: tuple[int, int]
+) -> None:
+    """Record the resolution's frame size and per-buffer dtype and channels from its first packed frame, or check a
+    later frame against them: another size, or a float buffer earlier frames stored as half, is an error; a half
+    buffer earlier frames stored as float is widened in place."""
+    if res["shape"] is None:
+        res["shape"] = list(shape)
+        for buffer in present:
+            slot = seq.layout.SLOTS[buffer]
+            stem = seq.file(buffer, height, frame).rsplit("/", 1)[-1].split(".")[0]
+            res["buffers"][buffer] = {
+                "dtype": arrays[buffer].dtype.name,
+                "channels": [f"{stem}.{c}" for c in slot.channels],
+            }
+    elif list(shape) != res["shape"]:
+        raise SceneError(
+            f"sequence {seq.name!r}, frame {frame}: {height}P is {shape[1]}x{shape[0]}, the sequence's "
+            f"first packed frame {res['shape'][1]}x{res['shape'][0]}"
+        )
+    for buffer in present:
+        stored = np.dtype(res["buffers"][buffer]["dtype"])
+        if arrays[buffer].dtype != stored:
+            if stored == np.float16:
+                raise SceneError(
+                    f"sequence {seq.name!r}, frame {frame}: buffer {buffer!r} at {height}P is float, "
+                    "earlier frames' is half: re-render the sequence with one precision per buffer"
+                )
+            arrays[buffer] = arrays[buffer].astype(stored)
+
+
+def _record_meta(arrays: dict, sources: dict, offset: int, length: int, depth_far: float | None) -> dict:
+    """A packed frame's index entry: where its record lies, its source files, its non-finite values per buffer and
+    its depth range (under ``depth_far`` and unclamped)."""
+    meta: dict = {"offset": offset, "length": length, "sources": sources}
+    meta["nonfinite"] = {b: int((~np.isfinite(a)).sum()) for b, a in arrays.items() if not np.isfinite(a).all()}
+    if "depth" in arrays:
+        depth = np.nan_to_num(arrays["depth"].astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        meta["depth_range"] = {far_key(f): list(depth_range(depth, f)) for f in {depth_far, None}}
+    return meta
+
+
+def _sync(out: BinaryIO) -> None:
+    """The file's writes on disk, before an index that records them is saved."""
+    out.flush()
+    os.fsync(out.fileno())
 
 
 def verify_sequence(seq: Sequence, packed: PackedSequence, frames: int | None = 2) -> int:

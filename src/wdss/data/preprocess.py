@@ -239,7 +239,16 @@ def build_batch(
     """
     keys = set(keys)
     m1, m2 = (margins or {}).get("prev", 0), (margins or {}).get("prev2", 0)
-    hr, lr, prev, prev_lr = roles["hr"], roles["lr"], roles["prev"], roles["prev_lr"]
+    batch = _hr_keys(keys, roles["hr"], prep)
+    batch |= _lr_keys(keys, roles, prep, lr_jitter)
+    batch |= _guide_keys(keys, roles["hr"], roles["lr"], prep, lr_jitter)
+    batch |= _history_keys(keys, roles["hr"], roles["prev"], prep, m1)
+    batch |= _other_keys(keys, roles, prep, m1, m2)
+    return batch
+
+
+def _hr_keys(keys: set[str], hr: dict[str, Tensor], prep: Preprocessing) -> dict[str, Tensor]:
+    """The HR frame's keys: the target, its BRDF factor and its emission (where it is separated)."""
     batch: dict[str, Tensor] = {}
     if "target" in keys:
         batch["target"] = hr["color"]
@@ -247,6 +256,15 @@ def build_batch(
         batch["brdf"] = brdf_of(hr, prep)
     if "emission" in keys and prep.separates_emission:
         batch["emission"] = hr["emission"]
+    return batch
+
+
+def _lr_keys(
+    keys: set[str], roles: dict[str, dict[str, Tensor]], prep: Preprocessing, lr_jitter: Tensor | None
+) -> dict[str, Tensor]:
+    """The LR frame's keys: its irradiance, BRDF factor, colour and guide, and where its pixels were shaded."""
+    lr = roles["lr"]
+    batch: dict[str, Tensor] = {}
     if "lr" in keys or "lr_brdf" in keys:
         lr_brdf = brdf_of(lr, prep) if (prep.demodulate or "lr_brdf" in keys) else None
         if "lr" in keys:
@@ -261,6 +279,14 @@ def build_batch(
         any_buffer = next(t for buffers in roles.values() for t in buffers.values())
         jitter = torch.zeros(len(any_buffer), 2) if lr_jitter is None else lr_jitter
         batch["lr_jitter"] = jitter.to(any_buffer.device, torch.float32)
+    return batch
+
+
+def _guide_keys(
+    keys: set[str], hr: dict[str, Tensor], lr: dict[str, Tensor], prep: Preprocessing, lr_jitter: Tensor | None
+) -> dict[str, Tensor]:
+    """The HR G-buffer and the spatial mask (the HR G-buffer against the LR frame's own)."""
+    batch: dict[str, Tensor] = {}
     if "gbuffer" in keys:
         batch["gbuffer"] = torch.cat([hr[name] for name in GBUFFER_STACK], dim=1)
     if "spatial_mask" in keys:
@@ -273,6 +299,15 @@ def build_batch(
             albedo_threshold=t["albedo"],
             jitter=lr_jitter,
         )
+    return batch
+
+
+def _history_keys(
+    keys: set[str], hr: dict[str, Tensor], prev: dict[str, Tensor], prep: Preprocessing, m1: int
+) -> dict[str, Tensor]:
+    """The previous frame warped by the motion vectors: its irradiance (the history) and the temporal mask of its
+    G-buffer against the current one (``prev`` extends ``m1`` pixels beyond the current window)."""
+    batch: dict[str, Tensor] = {}
     if "history" in keys or "temporal_mask" in keys:
         motion = hr["motion"]
         if "history" in keys:
@@ -283,6 +318,16 @@ def build_batch(
             stacked = torch.cat([prev[name] for name in names], dim=1)  # one warp for all
             warped = dict(zip(names, warp_backward(stacked, motion, origin=(m1, m1)).split([1, 3, 3], 1), strict=True))
             batch["temporal_mask"] = temporal_mask(hr, warped)
+    return batch
+
+
+def _other_keys(
+    keys: set[str], roles: dict[str, dict[str, Tensor]], prep: Preprocessing, m1: int, m2: int
+) -> dict[str, Tensor]:
+    """The motion vectors, the LR G-buffer, the previous LR frame, and the frame before the previous one warped to
+    the current one (``prev2`` extends ``m2`` pixels beyond the current window)."""
+    hr, lr, prev, prev_lr = roles["hr"], roles["lr"], roles["prev"], roles["prev_lr"]
+    batch: dict[str, Tensor] = {}
     if "motion" in keys:
         batch["motion"] = hr["motion"]
     if "lr_gbuffer" in keys:

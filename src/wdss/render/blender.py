@@ -41,22 +41,49 @@ def _principled_material(name: str, spec: Material):
     bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
     nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
     coords = nt.nodes.new("ShaderNodeTexCoord")
-    texture = nt.nodes.new(
-        {
-            "noise": "ShaderNodeTexNoise",
-            "voronoi": "ShaderNodeTexVoronoi",
-            "brick": "ShaderNodeTexBrick",
-            "wave": "ShaderNodeTexWave",
-            "checker": "ShaderNodeTexChecker",
-        }[spec.texture]
-    )
+    base_color = _texture_color(nt, coords, spec)
+    roughness = _roughness(nt, coords, spec)
+    normal = _fine_bump(nt, coords, spec)
+    nt.links.new(normal, bsdf.inputs["Normal"])
+    nt.links.new(base_color, bsdf.inputs["Base Color"])
+    nt.links.new(roughness, bsdf.inputs["Roughness"])
+    bsdf.inputs["Metallic"].default_value = spec.metallic
+    if spec.emission > 0:
+        bsdf.inputs["Emission Color"].default_value = (*spec.emission_color, 1.0)
+        bsdf.inputs["Emission Strength"].default_value = spec.emission
+    for aov_name, source in (("basecolor", base_color), ("roughness", roughness), ("metallic", None)):
+        aov = nt.nodes.new("ShaderNodeOutputAOV")
+        aov.aov_name = aov_name
+        if source is None:
+            aov.inputs["Value"].default_value = spec.metallic
+        else:
+            nt.links.new(source, aov.inputs["Color" if aov_name == "basecolor" else "Value"])
+    return mat
+
+
+_TEXTURES = {
+    "noise": "ShaderNodeTexNoise",
+    "voronoi": "ShaderNodeTexVoronoi",
+    "brick": "ShaderNodeTexBrick",
+    "wave": "ShaderNodeTexWave",
+    "checker": "ShaderNodeTexChecker",
+}
+
+
+def _texture_color(nt, coords, spec: Material):
+    """The base colour: the material's procedural texture mapped onto its two colours (the ramp's output)."""
+    texture = nt.nodes.new(_TEXTURES[spec.texture])
     texture.inputs["Scale"].default_value = spec.scale
     nt.links.new(coords.outputs["Object"], texture.inputs["Vector"])
     ramp = nt.nodes.new("ShaderNodeValToRGB")
     ramp.color_ramp.elements[0].color = (*spec.color_a, 1.0)
     ramp.color_ramp.elements[1].color = (*spec.color_b, 1.0)
     nt.links.new(texture.outputs["Distance" if spec.texture == "voronoi" else "Fac"], ramp.inputs["Fac"])
-    # Roughness: a second noise mapped into the material's range.
+    return ramp.outputs["Color"]
+
+
+def _roughness(nt, coords, spec: Material):
+    """The roughness: a second noise mapped into the material's range."""
     rough_noise = nt.nodes.new("ShaderNodeTexNoise")
     rough_noise.inputs["Scale"].default_value = spec.scale * 0.7
     nt.links.new(coords.outputs["Object"], rough_noise.inputs["Vector"])
@@ -64,7 +91,11 @@ def _principled_material(name: str, spec: Material):
     rough_map.inputs["To Min"].default_value = spec.roughness[0]
     rough_map.inputs["To Max"].default_value = spec.roughness[1]
     nt.links.new(rough_noise.outputs["Fac"], rough_map.inputs["Value"])
-    # Fine bump: the high frequencies super-resolution has to recover.
+    return rough_map.outputs["Result"]
+
+
+def _fine_bump(nt, coords, spec: Material):
+    """The normal of a fine bump: the high frequencies super-resolution has to recover."""
     detail = nt.nodes.new("ShaderNodeTexNoise")
     detail.inputs["Scale"].default_value = spec.scale * 6.0
     detail.inputs["Detail"].default_value = 8.0
@@ -73,25 +104,7 @@ def _principled_material(name: str, spec: Material):
     bump.inputs["Strength"].default_value = spec.bump
     bump.inputs["Distance"].default_value = 0.02
     nt.links.new(detail.outputs["Fac"], bump.inputs["Height"])
-    nt.links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
-    nt.links.new(ramp.outputs["Color"], bsdf.inputs["Base Color"])
-    nt.links.new(rough_map.outputs["Result"], bsdf.inputs["Roughness"])
-    bsdf.inputs["Metallic"].default_value = spec.metallic
-    if spec.emission > 0:
-        bsdf.inputs["Emission Color"].default_value = (*spec.emission_color, 1.0)
-        bsdf.inputs["Emission Strength"].default_value = spec.emission
-    for aov_name, source in (
-        ("basecolor", ramp.outputs["Color"]),
-        ("roughness", rough_map.outputs["Result"]),
-        ("metallic", None),
-    ):
-        aov = nt.nodes.new("ShaderNodeOutputAOV")
-        aov.aov_name = aov_name
-        if source is None:
-            aov.inputs["Value"].default_value = spec.metallic
-        else:
-            nt.links.new(source, aov.inputs["Color" if aov_name == "basecolor" else "Value"])
-    return mat
+    return bump.outputs["Normal"]
 
 
 _SHAPES = {

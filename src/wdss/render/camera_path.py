@@ -288,65 +288,15 @@ def fly_path(
     clearance = 0.25 * eye
     speed = eye * float(rng.uniform(0.025, 0.09))
     speed_wobble, wobble_period = float(rng.uniform(0.0, 0.8)), float(rng.uniform(12.0, 40.0))
-    lookahead = 3.0 * eye
     start = 2.0 * speed
     needed = start + speed * (frames + 1) * (1.0 + speed_wobble)  # beyond its end the curve goes straight on
-
-    def free(point: np.ndarray | None) -> bool:
-        if point is None:
-            return False
-        inside, nearest = inside_geometry(ray_cast, 0, point)
-        return not inside and nearest >= 2 * clearance
-
-    def standing(x: float, y: float) -> np.ndarray | None:
-        point = _standing_point(ray_cast, x, y, lo, hi, eye, clearance)
-        return point if free(point) else None
-
-    inner_lo, inner_hi = lo[:2] + 0.1 * size[:2], hi[:2] - 0.1 * size[:2]  # not on the scene's very edge
-    first = None
-    for _ in range(64):
-        first = standing(*rng.uniform(inner_lo, inner_hi))
-        if first is not None:
-            break
+    floor = _Floor(ray_cast, lo, hi, eye, clearance)
+    first = floor.first_point(rng)
     if first is None:
         return f"{NO_STANDING_POINT} for an eye height of {eye:.3g} (64 tries)"
     radius = min(max(needed, 4 * eye), 0.5 * float(np.hypot(size[0], size[1])))
-    candidates = []
-    for _ in range(64):
-        angle, r = rng.uniform(0, 2 * math.pi), radius * math.sqrt(rng.random())
-        x, y = np.clip(first[:2] + r * np.array([math.cos(angle), math.sin(angle)]), inner_lo, inner_hi)
-        point = standing(float(x), float(y))
-        if point is not None:
-            candidates.append(point)
-    budget = [400]  # line-of-sight tests of the depth-first search below
-
-    def extend(waypoints: list[np.ndarray], heading: np.ndarray | None, length: float) -> list[np.ndarray] | None:
-        """Waypoints from ``waypoints`` on, at least ``needed`` long: at most 4 branches per waypoint, turns
-        under 100 degrees; a waypoint may be visited again (loops), but not one of the last two."""
-        if length >= needed:
-            return waypoints
-        here = waypoints[-1]
-        options = []
-        for point in candidates:
-            step = point - here
-            distance = float(np.linalg.norm(step[:2]))
-            if not 1.5 * eye <= distance <= 6.0 * eye or any(point is w for w in waypoints[-2:]):
-                continue
-            turn = 0.0 if heading is None else abs(_angle(heading, step[:2]))
-            if turn < math.radians(100):
-                options.append((turn / math.pi + 0.5 * rng.random(), point))
-        for _, point in sorted(options, key=lambda option: option[0])[:4]:
-            if budget[0] <= 0:
-                return None
-            budget[0] -= 1
-            if _clear(ray_cast, here, point, clearance):
-                step = point - here
-                found = extend([*waypoints, point], step[:2], length + float(np.linalg.norm(step)))
-                if found is not None:
-                    return found
-        return None
-
-    waypoints = extend([first], None, 0.0)
+    candidates = floor.points_around(rng, first, radius)
+    waypoints = _Walk(rng, ray_cast, candidates, eye, clearance, needed).extend([first], None, 0.0)
     if waypoints is None:
         return f"no walk of {needed:.3g} units through free space from {first.round(3).tolist()}"
     return FlyPath(
@@ -355,12 +305,101 @@ def fly_path(
         speed=speed,
         speed_wobble=speed_wobble,
         wobble_period=wobble_period,
-        lookahead=lookahead,
+        lookahead=3.0 * eye,
         sway=float(rng.uniform(0.05, 0.35)),
         pitch=float(-rng.uniform(0.0, 0.2)),
         eye=eye,
         lens=float(rng.uniform(20.0, 32.0)),
     )
+
+
+class _Floor:
+    """Standing points of a fly-through: ``eye`` above a floor, with head room, in free space at least twice
+    ``clearance`` from any surface, and not on the scene's very edge."""
+
+    def __init__(self, ray_cast: RayCast, lo: np.ndarray, hi: np.ndarray, eye: float, clearance: float) -> None:
+        self.ray_cast, self.lo, self.hi, self.eye, self.clearance = ray_cast, lo, hi, eye, clearance
+        size = hi - lo
+        self.inner_lo, self.inner_hi = lo[:2] + 0.1 * size[:2], hi[:2] - 0.1 * size[:2]
+
+    def free(self, point: np.ndarray | None) -> bool:
+        if point is None:
+            return False
+        inside, nearest = inside_geometry(self.ray_cast, 0, point)
+        return not inside and nearest >= 2 * self.clearance
+
+    def standing(self, x: float, y: float) -> np.ndarray | None:
+        point = _standing_point(self.ray_cast, x, y, self.lo, self.hi, self.eye, self.clearance)
+        return point if self.free(point) else None
+
+    def first_point(self, rng: np.random.Generator) -> np.ndarray | None:
+        """A standing point at a seeded place (64 tries), or None."""
+        first = None
+        for _ in range(64):
+            first = self.standing(*rng.uniform(self.inner_lo, self.inner_hi))
+            if first is not None:
+                break
+        return first
+
+    def points_around(self, rng: np.random.Generator, first: np.ndarray, radius: float) -> list[np.ndarray]:
+        """The standing points among 64 seeded places within ``radius`` of ``first``: the walk's candidates."""
+        candidates = []
+        for _ in range(64):
+            angle, r = rng.uniform(0, 2 * math.pi), radius * math.sqrt(rng.random())
+            x, y = np.clip(first[:2] + r * np.array([math.cos(angle), math.sin(angle)]), self.inner_lo, self.inner_hi)
+            point = self.standing(float(x), float(y))
+            if point is not None:
+                candidates.append(point)
+        return candidates
+
+
+class _Walk:
+    """A depth-first search for a walk of at least ``needed`` units through ``candidates`` (joined by clear lines of
+    sight), within a budget of 400 line-of-sight tests."""
+
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        ray_cast: RayCast,
+        candidates: list[np.ndarray],
+        eye: float,
+        clearance: float,
+        needed: float,
+    ) -> None:
+        self.rng, self.ray_cast, self.candidates = rng, ray_cast, candidates
+        self.eye, self.clearance, self.needed = eye, clearance, needed
+        self.budget = 400
+
+    def extend(self, waypoints: list[np.ndarray], heading: np.ndarray | None, length: float) -> list[np.ndarray] | None:
+        """Waypoints from ``waypoints`` on, at least ``needed`` long: at most 4 branches per waypoint, turns
+        under 100 degrees; a waypoint may be visited again (loops), but not one of the last two."""
+        if length >= self.needed:
+            return waypoints
+        here = waypoints[-1]
+        for point in self._branches(waypoints, heading):
+            if self.budget <= 0:
+                return None
+            self.budget -= 1
+            if _clear(self.ray_cast, here, point, self.clearance):
+                step = point - here
+                found = self.extend([*waypoints, point], step[:2], length + float(np.linalg.norm(step)))
+                if found is not None:
+                    return found
+        return None
+
+    def _branches(self, waypoints: list[np.ndarray], heading: np.ndarray | None) -> list[np.ndarray]:
+        """The next waypoints to try from the last, at most 4: the gentlest turns first, with a seeded jitter."""
+        here = waypoints[-1]
+        options = []
+        for point in self.candidates:
+            step = point - here
+            distance = float(np.linalg.norm(step[:2]))
+            if not 1.5 * self.eye <= distance <= 6.0 * self.eye or any(point is w for w in waypoints[-2:]):
+                continue
+            turn = 0.0 if heading is None else abs(_angle(heading, step[:2]))
+            if turn < math.radians(100):
+                options.append((turn / math.pi + 0.5 * self.rng.random(), point))
+        return [point for _, point in sorted(options, key=lambda option: option[0])[:4]]
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> float:

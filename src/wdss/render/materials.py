@@ -78,17 +78,23 @@ def _sources(nt, socket, threshold: float, depth: int = 0) -> dict[str, Source] 
                 return found
         return None
     if node.type == "MIX_SHADER":
-        factor = _input(node.inputs[0])
-        a, b = _sources(nt, node.inputs[1], threshold, depth + 1), _sources(nt, node.inputs[2], threshold, depth + 1)
-        if a is not None and b is not None:
-            return {aov: _mix(nt, factor, a[aov], b[aov], aov == "basecolor") for aov, _, _ in _CHANNELS}
-        # A cut-out: a Transparent BSDF mixed with the surface, whose alpha is then the mix's weight of it.
-        if b is not None and _linked_type(node.inputs[1]) == "BSDF_TRANSPARENT":
-            return _gate(nt, b, factor, threshold)
-        if a is not None and _linked_type(node.inputs[2]) == "BSDF_TRANSPARENT":
-            return _gate(nt, a, _one_minus(nt, factor), threshold)
-        return a or b
+        return _mix_shader_sources(nt, node, threshold, depth)
     return None
+
+
+def _mix_shader_sources(nt, node, threshold: float, depth: int) -> dict[str, Source] | None:
+    """The sources behind a Mix Shader ``node``: its branches' mixed by its factor, or the one branch that resolves
+    (gated by the mix's weight of a Transparent BSDF on the other side: a cut-out)."""
+    factor = _input(node.inputs[0])
+    a, b = _sources(nt, node.inputs[1], threshold, depth + 1), _sources(nt, node.inputs[2], threshold, depth + 1)
+    if a is not None and b is not None:
+        return {aov: _mix(nt, factor, a[aov], b[aov], aov == "basecolor") for aov, _, _ in _CHANNELS}
+    # A cut-out: a Transparent BSDF mixed with the surface, whose alpha is then the mix's weight of it.
+    if b is not None and _linked_type(node.inputs[1]) == "BSDF_TRANSPARENT":
+        return _gate(nt, b, factor, threshold)
+    if a is not None and _linked_type(node.inputs[2]) == "BSDF_TRANSPARENT":
+        return _gate(nt, a, _one_minus(nt, factor), threshold)
+    return a or b
 
 
 def _one_minus(nt, value: Source) -> Source:
@@ -173,6 +179,22 @@ def wire_aovs(objects: Iterable[Any], *, alpha_threshold: float = 0.5) -> list[d
     ``{"material", "objects", "reason", "base_color", "roughness", "metallic"}`` (``material`` None for objects
     that had none and got :data:`DEFAULT_MATERIAL`). ``alpha_threshold``: the view layer's
     ``pass_alpha_threshold`` (see :func:`_gate`)."""
+    users, bare = _material_users(objects)
+    records = []
+    if bare:
+        names = sorted(set(bare))
+        log.warning("objects without a material get wdss's default grey Principled BSDF: %s", ", ".join(names))
+        records.append({"material": None, "objects": names, "reason": "no material", **DEFAULT_MATERIAL})
+    for material, names in sorted(users.items(), key=lambda item: item[0].name):
+        record = _wire_material(material, names, alpha_threshold)
+        if record is not None:
+            records.append(record)
+    return records
+
+
+def _material_users(objects: Iterable[Any]) -> tuple[dict[Any, list[str]], list[str]]:
+    """The objects using each material, and those that had none (or an empty slot among filled ones), which get
+    :func:`_default_material` here."""
     users: dict[Any, list[str]] = {}
     bare: list[str] = []
     for obj in objects:
@@ -190,48 +212,47 @@ def wire_aovs(objects: Iterable[Any], *, alpha_threshold: float = 0.5) -> list[d
                 slot.material = _default_material()
                 bare.append(obj.name)
             users.setdefault(slot.material, []).append(obj.name)
-    records = []
-    if bare:
-        names = sorted(set(bare))
-        log.warning("objects without a material get wdss's default grey Principled BSDF: %s", ", ".join(names))
-        records.append({"material": None, "objects": names, "reason": "no material", **DEFAULT_MATERIAL})
-    for material, names in sorted(users.items(), key=lambda item: item[0].name):
-        nt = material.node_tree
-        output = nt.get_output_node("CYCLES") if nt is not None else None
-        sources = _sources(nt, output.inputs["Surface"], alpha_threshold) if output is not None else None
-        if sources is not None:
-            _add_aovs(nt, sources)
-            continue
-        reason = (
-            "no node tree"
-            if nt is None
-            else "no material output"
-            if output is None
-            else f"no Principled BSDF reachable from the output (surface: {_surface_kind(output)})"
-        )
-        sources = _fallback_sources(material)
-        if nt is not None:
-            _add_aovs(nt, sources)
-        record = {
-            "material": material.name,
-            "objects": sorted(set(names)),
-            "reason": reason,
-            "base_color": [round(float(c), 6) for c in sources["basecolor"][:3]],
-            "roughness": round(sources["roughness"], 6),
-            "metallic": round(sources["metallic"], 6),
-        }
-        log.warning(
-            "material %r (objects %s): the G-buffer AOVs cannot be read (%s); base colour, roughness and metallic "
-            "fall back to its viewport display settings %s, %s, %s",
-            record["material"],
-            ", ".join(record["objects"]),
-            reason,
-            record["base_color"],
-            record["roughness"],
-            record["metallic"],
-        )
-        records.append(record)
-    return records
+    return users, bare
+
+
+def _wire_material(material: Any, names: list[str], alpha_threshold: float) -> dict[str, Any] | None:
+    """Wire one material's AOVs from its sources, or from its viewport display settings where they cannot be read
+    (a warning names it and the objects ``names``, and its record is returned; None: read)."""
+    nt = material.node_tree
+    output = nt.get_output_node("CYCLES") if nt is not None else None
+    sources = _sources(nt, output.inputs["Surface"], alpha_threshold) if output is not None else None
+    if sources is not None:
+        _add_aovs(nt, sources)
+        return None
+    reason = (
+        "no node tree"
+        if nt is None
+        else "no material output"
+        if output is None
+        else f"no Principled BSDF reachable from the output (surface: {_surface_kind(output)})"
+    )
+    sources = _fallback_sources(material)
+    if nt is not None:
+        _add_aovs(nt, sources)
+    record = {
+        "material": material.name,
+        "objects": sorted(set(names)),
+        "reason": reason,
+        "base_color": [round(float(c), 6) for c in sources["basecolor"][:3]],
+        "roughness": round(sources["roughness"], 6),
+        "metallic": round(sources["metallic"], 6),
+    }
+    log.warning(
+        "material %r (objects %s): the G-buffer AOVs cannot be read (%s); base colour, roughness and metallic "
+        "fall back to its viewport display settings %s, %s, %s",
+        record["material"],
+        ", ".join(record["objects"]),
+        reason,
+        record["base_color"],
+        record["roughness"],
+        record["metallic"],
+    )
+    return record
 
 
 def _surface_kind(output) -> str:

@@ -179,22 +179,12 @@ class FileScene(CyclesScene):
     ):
         import bpy
 
-        from wdss.render.blender import _quiet, configure_cycles
         from wdss.render.materials import wire_aovs
 
         self.samples, self.denoise, self.filter_width = samples, denoise, filter_width
         self.kind = SCENE_KINDS[path.suffix.lower()]
         where = f"render.scene ({where}): {path}" if where else f"render.scene: {path}"
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        bpy.context.preferences.filepaths.use_scripts_auto_execute = False
-        try:
-            with _quiet():
-                if self.kind == "gltf":
-                    bpy.ops.import_scene.gltf(filepath=str(path), loglevel=logging.WARNING)  # not a line per node
-                else:
-                    bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
-        except RuntimeError as err:
-            raise ConfigError(f"{where} could not be read: {str(err).strip()}") from err
+        self._load(path, where)
         scene = self.scene = bpy.context.scene
         layer = bpy.context.view_layer
         self._show_what_renders(layer)
@@ -205,17 +195,11 @@ class FileScene(CyclesScene):
         if bounds is None:
             raise ConfigError(f"{where} has no mesh to render")
         lo, hi = bounds
-        for other in scene.view_layers:
-            other.use = other == layer
-        configure_cycles(scene, layer, seed=seed, threads=threads)
-        render = scene.render
-        render.use_compositing = render.use_sequencer = render.use_border = False
-        render.pixel_aspect_x = render.pixel_aspect_y = 1.0
-        scene.cycles.film_exposure = 1.0  # radiance in scene units: the sequence's exposure is calibrated later
+        self._configure_render(layer, seed, threads)
         materials = wire_aovs(geometry, alpha_threshold=layer.pass_alpha_threshold)
         lights = self._light(lighting, seed)
         width, height = resolution
-        render.resolution_x, render.resolution_y, render.resolution_percentage = width, height, 100
+        scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = width, height, 100
         mode, camera_info = self._frame(camera, seed, frames, lo, hi, width, height, where)
         self.description = {
             "file": str(path),
@@ -231,6 +215,38 @@ class FileScene(CyclesScene):
         }
 
     # -- loading -------------------------------------------------------------------------------------------------
+    def _load(self, path: Path, where: str) -> None:
+        """Open the file in a factory-fresh Blender (its scripts never run); one Blender cannot read is an error
+        naming it."""
+        import bpy
+
+        from wdss.render.blender import _quiet
+
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        bpy.context.preferences.filepaths.use_scripts_auto_execute = False
+        try:
+            with _quiet():
+                if self.kind == "gltf":
+                    bpy.ops.import_scene.gltf(filepath=str(path), loglevel=logging.WARNING)  # not a line per node
+                else:
+                    bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
+        except RuntimeError as err:
+            raise ConfigError(f"{where} could not be read: {str(err).strip()}") from err
+
+    def _configure_render(self, layer: Any, seed: int, threads: int) -> None:
+        """Cycles as wdss renders, on ``layer`` alone: no compositing, sequencer or border, square pixels, and
+        radiance in scene units (the sequence's exposure is calibrated later)."""
+        from wdss.render.blender import configure_cycles
+
+        scene = self.scene
+        for other in scene.view_layers:
+            other.use = other == layer
+        configure_cycles(scene, layer, seed=seed, threads=threads)
+        render = scene.render
+        render.use_compositing = render.use_sequencer = render.use_border = False
+        render.pixel_aspect_x = render.pixel_aspect_y = 1.0
+        scene.cycles.film_exposure = 1.0
+
     @staticmethod
     def _play_gltf_animations() -> dict[str, str]:
         """Let every animated object of a glTF play, each its first animation; which ones, by object.

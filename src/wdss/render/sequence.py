@@ -14,13 +14,14 @@ EXR; a frame whose files all exist is skipped when the render is run again.
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import json
 import logging
 import os
 import sys
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -166,41 +167,120 @@ def render_sequence(
     frame is rendered, re-render the scored frames (1..frames) with another seed and record the targets' noise
     ceiling in ``sequence.json`` (:mod:`wdss.render.noise`; kept when the sequence is resumed).
     """
-    from wdss.render.convert import to_buffers
+    scene_path = _scene_file(name, scene, camera, lighting, spec)
+    options = _Options.checked(
+        frames, resolution, scales, lr_mode, samples, lr_samples, denoise, filter_width, threads, compression, half,
+        exposure,
+    )  # fmt: skip
+    folder = Path(out_dir) / name
+    settings = _settings(options, scene_path, camera, lighting)
+    previous_meta = _previous_meta(folder, seed, settings)
+    todo = [f for f in range(frames + 1) if not all(p.exists() for p in frame_files(folder, f, options.heights))]
+    measure = noise_ceiling and not (previous_meta and "noise" in previous_meta)
+    task = progress.add_task(name, total=frames + 1, completed=frames + 1 - len(todo)) if progress else None
+    if scene_path is not None and previous_meta and not todo and not measure:
+        return folder  # nothing to do: the file is not even loaded
+    staged = _stage_scene(name, seed, options, spec, objects, scene_path, camera, lighting, settings)
+    folder.mkdir(parents=True, exist_ok=True)
+    meta = _sidecar(name, seed, settings, options, staged, previous_meta)
+    _write_json(folder / "sequence.json", meta)
+    for stale in folder.rglob(".*.tmp"):  # a render killed while writing leaves only its temporary file
+        stale.unlink()
+    if todo or measure:
+        _render(staged.blender_scene(), folder, meta, todo, measure, options, staged, (progress, task))
+    return folder
 
+
+@dataclasses.dataclass(frozen=True)
+class _Options:
+    """How a sequence is rendered and stored: :func:`render_sequence`'s options, checked."""
+
+    frames: int
+    width: int
+    height: int
+    scales: list[int]
+    lr_mode: str
+    samples: int
+    lr_samples: int
+    denoise: bool
+    filter_width: float
+    threads: int
+    compression: str
+    half: bool
+    exposure: float | str
+
+    @classmethod
+    def checked(
+        cls,
+        frames: int,
+        resolution: tuple[int, int],
+        scales: Iterable[int],
+        lr_mode: str,
+        samples: int,
+        lr_samples: int,
+        denoise: bool,
+        filter_width: float,
+        threads: int,
+        compression: str,
+        half: bool,
+        exposure: float | str,
+    ) -> _Options:
+        """The options, once the LR mode, the exposure and the scales (each dividing the resolution) are valid."""
+        if lr_mode not in LR_MODES:
+            raise ConfigError(f"render.lr_mode must be one of {', '.join(LR_MODES)}, got {lr_mode!r}")
+        width, height = resolution
+        scales = [int(s) for s in scales]
+        if exposure != "auto" and not (isinstance(exposure, (int, float)) and exposure > 0):
+            raise ConfigError(f"render.exposure must be 'auto' or a positive number, got {exposure!r}")
+        for s in scales:
+            if width % s or height % s:
+                raise ConfigError(f"render.resolution {width}x{height} is not divisible by scale {s}")
+        return cls(
+            frames, width, height, scales, lr_mode, samples, lr_samples, denoise, filter_width, threads, compression,
+            half, exposure,
+        )  # fmt: skip
+
+    @property
+    def heights(self) -> list[int]:
+        """The heights of a frame's folders: the HR one, then one per scale."""
+        return [self.height] + [self.height // s for s in self.scales]
+
+
+def _scene_file(name: str, scene: str | Path | None, camera: str, lighting: str, spec: SceneSpec | None) -> Path | None:
+    """The checked scene file to render (None: a procedural scene); a file and a ``spec`` both is an error."""
     scene_path = check_scene(scene, camera, lighting, where=f"sequence {name!r}")
     if scene_path is not None and spec is not None:
         raise ConfigError(f"sequence {name!r}: give a procedural spec or a scene file (render.scene), not both")
-    if lr_mode not in LR_MODES:
-        raise ConfigError(f"render.lr_mode must be one of {', '.join(LR_MODES)}, got {lr_mode!r}")
-    width, height = resolution
-    scales = [int(s) for s in scales]
-    if exposure != "auto" and not (isinstance(exposure, (int, float)) and exposure > 0):
-        raise ConfigError(f"render.exposure must be 'auto' or a positive number, got {exposure!r}")
-    for s in scales:
-        if width % s or height % s:
-            raise ConfigError(f"render.resolution {width}x{height} is not divisible by scale {s}")
-    folder = Path(out_dir) / name
-    heights = [height] + [height // s for s in scales]
+    return scene_path
+
+
+def _settings(options: _Options, scene_path: Path | None, camera: str, lighting: str) -> dict[str, Any]:
+    """What ``sequence.json`` records as the sequence's settings (a render with other settings is refused there)."""
     settings = {
-        "frames": frames,
-        "resolution": [width, height],
-        "scales": scales,
-        "lr_mode": lr_mode,
-        "samples": samples,
-        "lr_samples": lr_samples,
-        "denoise": denoise,
-        **({"denoise_prefilter": "none"} if denoise else {}),  # see stale_render
+        "frames": options.frames,
+        "resolution": [options.width, options.height],
+        "scales": options.scales,
+        "lr_mode": options.lr_mode,
+        "samples": options.samples,
+        "lr_samples": options.lr_samples,
+        "denoise": options.denoise,
+        **({"denoise_prefilter": "none"} if options.denoise else {}),  # see stale_render
         "passes": ["emission"],  # buffers beyond the authors' layout (see stale_render)
-        "filter_width": filter_width,
-        "compression": compression,
-        "half": half,
-        "exposure": exposure,
+        "filter_width": options.filter_width,
+        "compression": options.compression,
+        "half": options.half,
+        "exposure": options.exposure,
         "blender": "bpy 5.0.1, Cycles CPU",
     }
     if scene_path is not None:  # only for files: procedural sidecars keep their settings (and resume)
         settings["scene"] = {"file": scene_path.name, "sha256": file_digest(scene_path)}
         settings["camera"], settings["lighting"] = camera, lighting
+    return settings
+
+
+def _previous_meta(folder: Path, seed: int, settings: dict[str, Any]) -> dict[str, Any] | None:
+    """The sidecar of an earlier render into ``folder`` (None: there is none), refused when made with another seed
+    or other settings."""
     sidecar = folder / "sequence.json"
     previous_meta = json.loads(sidecar.read_text()) if sidecar.exists() else None
     if previous_meta and (previous_meta.get("seed") != seed or previous_meta.get("settings") != settings):
@@ -208,38 +288,82 @@ def render_sequence(
             f"{folder} holds a sequence rendered with other settings (seed {previous_meta.get('seed')}); "
             "remove it or render into another folder"
         )
-    todo = [f for f in range(frames + 1) if not all(p.exists() for p in frame_files(folder, f, heights))]
-    measure = noise_ceiling and not (previous_meta and "noise" in previous_meta)
-    task = progress.add_task(name, total=frames + 1, completed=frames + 1 - len(todo)) if progress else None
-    blender_scene: Any = None
+    return previous_meta
+
+
+@dataclasses.dataclass(frozen=True)
+class _Staged:
+    """A sequence's scene before any frame is rendered: its camera (``lens``, ``poses`` of frames -1..frames), its
+    description for the sidecar, and its Blender scene (a file's is loaded at once, a procedural one built only when
+    a frame is to be rendered)."""
+
+    lens: float
+    poses: Mapping[int, np.ndarray]
+    description: dict[str, Any]
+    blender_scene: Callable[[], Any]
+
+
+def _stage_scene(
+    name: str,
+    seed: int,
+    options: _Options,
+    spec: SceneSpec | None,
+    objects: tuple[int, int],
+    scene_path: Path | None,
+    camera: str,
+    lighting: str,
+    settings: dict[str, Any],
+) -> _Staged:
+    """The sequence's scene: the procedural ``spec`` (``random_scene(seed)`` without one), or the scene file loaded
+    and framed (before the folder is made: a file with no mesh, or no camera for camera=file, creates nothing)."""
     if scene_path is None:
         spec = spec or random_scene(seed, min_objects=objects[0], max_objects=objects[1])
-        lens = spec.camera.lens
-        poses = {f: camera_pose(spec.camera, f) for f in range(-1, frames + 1)}
-        description = spec.to_dict()
-    else:
-        if previous_meta and not todo and not measure:
-            return folder
-        from wdss.render.scene_file import FileScene
+        poses = {f: camera_pose(spec.camera, f) for f in range(-1, options.frames + 1)}
+        return _Staged(spec.camera.lens, poses, spec.to_dict(), lambda: _procedural_scene(spec, options))
+    from wdss.render.scene_file import FileScene
 
-        # Loaded before the folder is made: a file with no mesh (or no camera for camera=file) creates nothing.
-        blender_scene = FileScene(
-            scene_path,
-            seed=seed,
-            frames=frames,
-            resolution=(width, height),
-            camera=camera,
-            lighting=lighting,
-            samples=samples,
-            denoise=denoise,
-            filter_width=filter_width,
-            threads=threads,
-            where=f"sequence {name!r}",
-            digest=settings["scene"]["sha256"],
-        )
-        lens, poses, description = blender_scene.lens, blender_scene.poses, blender_scene.description
-    folder.mkdir(parents=True, exist_ok=True)
-    meta = {
+    loaded = FileScene(
+        scene_path,
+        seed=seed,
+        frames=options.frames,
+        resolution=(options.width, options.height),
+        camera=camera,
+        lighting=lighting,
+        samples=options.samples,
+        denoise=options.denoise,
+        filter_width=options.filter_width,
+        threads=options.threads,
+        where=f"sequence {name!r}",
+        digest=settings["scene"]["sha256"],
+    )
+    return _Staged(loaded.lens, loaded.poses, loaded.description, lambda: loaded)
+
+
+def _procedural_scene(spec: SceneSpec, options: _Options) -> Any:
+    """The procedural scene ``spec`` built in Blender (:class:`wdss.render.blender.BlenderScene`)."""
+    from wdss.render.blender import BlenderScene
+
+    return BlenderScene(
+        spec,
+        samples=options.samples,
+        denoise=options.denoise,
+        filter_width=options.filter_width,
+        threads=options.threads,
+    )
+
+
+def _sidecar(
+    name: str,
+    seed: int,
+    settings: dict[str, Any],
+    options: _Options,
+    staged: _Staged,
+    previous_meta: dict[str, Any] | None,
+) -> dict[str, Any]:
+    """The sequence's ``sequence.json``: what made it, its conventions and cameras, and what an earlier render of it
+    recorded (frame times, the exposure chosen, the noise ceiling)."""
+    width, height, lens = options.width, options.height, staged.lens
+    return {
         "name": name,
         "seed": seed,
         "layout": "unreal",
@@ -254,56 +378,71 @@ def render_sequence(
             "motion": "HR pixels, current minus previous screen position, y up",
             "depth": "planar camera depth, background 0",
         },
-        "sampling": sampling_convention(lr_mode, filter_width, {height // s: s for s in scales}),
-        "scene": description,
-        "frames": [_frame_record(f, poses[f], lr_mode) for f in range(frames + 1)],
+        "sampling": sampling_convention(
+            options.lr_mode, options.filter_width, {height // s: s for s in options.scales}
+        ),
+        "scene": staged.description,
+        "frames": [_frame_record(f, staged.poses[f], options.lr_mode) for f in range(options.frames + 1)],
         "render_seconds": (previous_meta or {}).get("render_seconds", {}),
         # The pre-exposure applied to the radiance of every frame (None until the probes have chosen it).
-        "exposure": exposure if exposure != "auto" else (previous_meta or {}).get("exposure"),
+        "exposure": options.exposure if options.exposure != "auto" else (previous_meta or {}).get("exposure"),
         # The targets' noise ceiling measured on these frames (python -m wdss.bench noise --record) stays theirs.
         **({"noise": previous_meta["noise"]} if previous_meta and "noise" in previous_meta else {}),
     }
-    _write_json(sidecar, meta)
-    for stale in folder.rglob(".*.tmp"):  # a render killed while writing leaves only its temporary file
-        stale.unlink()
-    if not todo and not measure:
-        return folder
-    if blender_scene is None:
-        from wdss.render.blender import BlenderScene
 
-        blender_scene = BlenderScene(spec, samples=samples, denoise=denoise, filter_width=filter_width, threads=threads)
-    scene = blender_scene
+
+def _render(
+    scene: Any,
+    folder: Path,
+    meta: dict[str, Any],
+    todo: list[int],
+    measure: bool,
+    options: _Options,
+    staged: _Staged,
+    progress: tuple[Progress | None, Any],
+) -> None:
+    """Render the frames of ``todo`` in order, the exposure chosen first where it is still to be, and the sidecar
+    rewritten after each frame with its time (a frame is done once it is recorded); then, with ``measure``, the
+    targets' noise ceiling (``progress``: the bar and its task)."""
+    sidecar = folder / "sequence.json"
     if meta["exposure"] is None:  # recorded before any file is written: a resumed render applies the same
-        meta["exposure"] = _probe_exposure(scene, frames, width, height)
+        meta["exposure"] = _probe_exposure(scene, options.frames, options.width, options.height)
         _write_json(sidecar, meta)
+    bar, task = progress
     for frame in todo:
         start = time.perf_counter()
-        camera_to_world, previous = poses[frame], poses[frame - 1]
-        hr = to_buffers(scene.render(frame, width, height), camera=camera_to_world, previous_camera=previous, lens=lens)
-        _expose(hr, meta["exposure"])
-        write_unreal_frame(folder / f"{height}P", frame, hr, compression, half)
-        for s in scales:
-            size = lr_size(height, width, s)
-            if lr_mode == "downsample":
-                lr = {k: point_sample(torch.from_numpy(v)[None], size)[0].numpy() for k, v in hr.items()}
-            else:
-                jitter = _lr_jitter(lr_mode, frame)
-                passes = scene.render(frame, size[1], size[0], samples=lr_samples, jitter=jitter)
-                lr = to_buffers(
-                    passes, camera=camera_to_world, previous_camera=previous, lens=lens, motion_scale=float(s)
-                )
-                _expose(lr, meta["exposure"])
-            write_unreal_frame(folder / f"{size[0]}P", frame, lr, compression, half)
+        _render_frame(scene, folder, frame, options, staged, meta["exposure"])
         meta["render_seconds"][str(frame)] = round(time.perf_counter() - start, 3)
         _write_json(sidecar, meta)
-        if progress is not None:
-            progress.advance(task)
+        if bar is not None:
+            bar.advance(task)
     if measure:
         from wdss.render.noise import measure_noise
 
-        meta["noise"] = measure_noise(scene, folder, meta["exposure"], range(1, frames + 1))
+        meta["noise"] = measure_noise(scene, folder, meta["exposure"], range(1, options.frames + 1))
         _write_json(sidecar, meta)
-    return folder
+
+
+def _render_frame(scene: Any, folder: Path, frame: int, options: _Options, staged: _Staged, exposure: float) -> None:
+    """Render and write one frame: its HR buffers, then each scale's LR buffers (point samples of the HR frame, or
+    rendered at LR)."""
+    from wdss.render.convert import to_buffers
+
+    width, height, lens = options.width, options.height, staged.lens
+    camera_to_world, previous = staged.poses[frame], staged.poses[frame - 1]
+    hr = to_buffers(scene.render(frame, width, height), camera=camera_to_world, previous_camera=previous, lens=lens)
+    _expose(hr, exposure)
+    write_unreal_frame(folder / f"{height}P", frame, hr, options.compression, options.half)
+    for s in options.scales:
+        size = lr_size(height, width, s)
+        if options.lr_mode == "downsample":
+            lr = {k: point_sample(torch.from_numpy(v)[None], size)[0].numpy() for k, v in hr.items()}
+        else:
+            jitter = _lr_jitter(options.lr_mode, frame)
+            passes = scene.render(frame, size[1], size[0], samples=options.lr_samples, jitter=jitter)
+            lr = to_buffers(passes, camera=camera_to_world, previous_camera=previous, lens=lens, motion_scale=float(s))
+            _expose(lr, exposure)
+        write_unreal_frame(folder / f"{size[0]}P", frame, lr, options.compression, options.half)
 
 
 # What a config (or one of its sequences) may set: render_sequence's keyword options.

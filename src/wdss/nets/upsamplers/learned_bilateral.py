@@ -42,7 +42,13 @@ import torch
 from torch import Tensor, nn
 
 from wdss.nets.base import SuperResolutionNet
-from wdss.nets.upsamplers.joint_bilateral import check_ranges, joint_bilateral_upsample, neighbourhood, range_weight
+from wdss.nets.upsamplers.joint_bilateral import (
+    Tap,
+    check_ranges,
+    joint_bilateral_upsample,
+    neighbourhood,
+    range_weight,
+)
 
 __all__ = ["LearnedBilateralUpsample"]
 
@@ -136,54 +142,77 @@ class LearnedBilateralUpsample(SuperResolutionNet):
         if self.tap_brdf and (brdf is None or lr_brdf is None):
             raise ValueError("this learned bilateral kernel has tap_brdf=true: it needs the HR brdf and the lr_brdf")
         lr, gbuffer = lr.float().clamp_min(0), gbuffer.float()
-        n, (height, width) = lr.shape[0], gbuffer.shape[-2:]
+        shape = (lr.shape[0], *gbuffer.shape[-2:])
         # Where each tap lies against the fixed estimate: outliers (fireflies, the other side of an edge) show here.
         # A pass of its own: keeping the 16 taps for one pass would hold ~1.7 GB at 1080p instead of one tap.
         fixed = joint_bilateral_upsample(lr, gbuffer, lr_guide=lr_guide, lr_jitter=lr_jitter, **self.ranges)
         reference = torch.log1p(fixed)
         context = [self.context(gbuffer[:, :GBUFFER_CHANNELS])] if self.context is not None else []
         source = [lr, torch.log1p(lr)]  # gathered together: the values and their logs (and the taps' log F)
+        log_brdf = None
         if self.tap_brdf:
             log_brdf = torch.log(brdf.float().clamp_min(1e-4))
             source.append(torch.log(lr_brdf.float().clamp_min(1e-4)))  # F at the LR pixels, as lr was demodulated
         source = torch.cat(source, 1)
         logits, values = [], []
         for tap in neighbourhood(source, gbuffer, lr_guide=lr_guide, lr_jitter=lr_jitter, **self.ranges):
-            row, col = tap.offset
-            features = torch.cat(
-                [
-                    tap.difference.clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT),
-                    tap.difference.abs().clamp_max(_DIFFERENCE_LIMIT),
-                    row[:, None, :, None].expand(n, 1, height, width),
-                    col[:, None, None, :].expand(n, 1, height, width),
-                    tap.spatial.expand(n, 1, height, width),
-                    tap.values[:, 3:6] - reference,
-                    *context,
-                    *(
-                        [(tap.values[:, 6:9] - log_brdf).clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT)]
-                        if self.tap_brdf
-                        else []
-                    ),
-                ],
-                1,
-            )
-            out = self.mlp(features)
-            correction = out[:, :1].clamp(-_LOGIT_LIMIT, 0.0 if self.never_raise else _LOGIT_LIMIT)
-            if self.raise_within_albedo:  # a raise counts only as far as the tap's albedo matches the pixel's
-                gate = torch.exp(-(tap.difference[:, :3] ** 2).sum(1, keepdim=True))
-                correction = correction.clamp_max(0.0) + gate * correction.clamp_min(0.0)
-            # Taps outside the tent (weight 0) stay out: -inf would make a NaN gradient, a large negative does not.
-            base = torch.log(range_weight(tap).clamp_min(1e-30))
-            logits.append(torch.where(tap.spatial > 0, base + correction, -1e4))
-            value = tap.values[:, :3]
-            if self.tap_brdf:  # clamp, not a sigmoid: the kernel starts exactly at b = 0, and its gradient flows there
-                exponent = out[:, 1:2].clamp(0.0, 1.0)
-                value = value * torch.exp(
-                    exponent * (tap.values[:, 6:9] - log_brdf).clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT)
-                )
-            values.append(value)
+            out = self.mlp(self._features(tap, shape, reference, context, log_brdf))
+            logits.append(self._logit(tap, out))
+            values.append(self._value(tap, out, log_brdf))
         weights = torch.softmax(torch.stack(logits), 0)
         return (weights * torch.stack(values)).sum(0)
+
+    def _features(
+        self,
+        tap: Tap,
+        shape: tuple[int, int, int],
+        reference: Tensor,
+        context: list[Tensor],
+        log_brdf: Tensor | None,
+    ) -> Tensor:
+        """The per-tap MLP's input (N, C, H, W): the tap's G-buffer difference, its offset and spatial weight, its
+        log value against the fixed estimate ``reference``, the ``context`` features, and with ``tap_brdf`` its log
+        BRDF factor against the pixel's (``shape``: N, H, W)."""
+        n, height, width = shape
+        row, col = tap.offset
+        return torch.cat(
+            [
+                tap.difference.clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT),
+                tap.difference.abs().clamp_max(_DIFFERENCE_LIMIT),
+                row[:, None, :, None].expand(n, 1, height, width),
+                col[:, None, None, :].expand(n, 1, height, width),
+                tap.spatial.expand(n, 1, height, width),
+                tap.values[:, 3:6] - reference,
+                *context,
+                *(
+                    [(tap.values[:, 6:9] - log_brdf).clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT)]
+                    if self.tap_brdf
+                    else []
+                ),
+            ],
+            1,
+        )
+
+    def _logit(self, tap: Tap, out: Tensor) -> Tensor:
+        """The tap's log weight: the fixed kernel's, corrected by the MLP's first output ``out[:, :1]``."""
+        correction = out[:, :1].clamp(-_LOGIT_LIMIT, 0.0 if self.never_raise else _LOGIT_LIMIT)
+        if self.raise_within_albedo:  # a raise counts only as far as the tap's albedo matches the pixel's
+            gate = torch.exp(-(tap.difference[:, :3] ** 2).sum(1, keepdim=True))
+            correction = correction.clamp_max(0.0) + gate * correction.clamp_min(0.0)
+        # Taps outside the tent (weight 0) stay out: -inf would make a NaN gradient, a large negative does not.
+        base = torch.log(range_weight(tap).clamp_min(1e-30))
+        return torch.where(tap.spatial > 0, base + correction, -1e4)
+
+    def _value(self, tap: Tap, out: Tensor, log_brdf: Tensor | None) -> Tensor:
+        """The tap's irradiance, with ``tap_brdf`` carried ``b`` (the MLP's second output) of the way to the tap's
+        own colour."""
+        value = tap.values[:, :3]
+        if self.tap_brdf:  # clamp, not a sigmoid: the kernel starts exactly at b = 0, and its gradient flows there
+            exponent = out[:, 1:2].clamp(0.0, 1.0)
+            value = value * torch.exp(
+                exponent * (tap.values[:, 6:9] - log_brdf).clamp(-_DIFFERENCE_LIMIT, _DIFFERENCE_LIMIT)
+            )
+        return value
 
     def forward(
         self,
