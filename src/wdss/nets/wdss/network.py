@@ -274,6 +274,42 @@ class Refinement(nn.Module):
         return self.body(torch.cat([log_image, guide], 1))
 
 
+def _checked_choices(
+    transform: str,
+    basis: str,
+    head: Head | None,
+    wavelet: WaveletTransform | None,
+    output_space: str,
+    upsampler: nn.Module | None,
+    residual_input: bool,
+) -> tuple[str, str, Head]:
+    """The network's choices checked, in the order a config is read: its transform and basis (from ``wavelet`` when
+    the transform group built one) and its head (the paper's :class:`SharedINR` when None)."""
+    if output_space not in OUTPUT_SPACES:
+        raise ValueError(f"model.output_space must be one of {', '.join(OUTPUT_SPACES)}, got {output_space!r}")
+    if upsampler is not None and not isinstance(upsampler, nn.Module):
+        raise ValueError(
+            f"model.net.upsampler must be a residual upsampler (conf/residual/*.yaml) or None, got {upsampler!r}"
+        )
+    if residual_input and upsampler is None:
+        raise ValueError(
+            "model.net.residual_input (recipe.residual_input) needs a residual upsampler "
+            "(residual=bilinear, joint_bilateral or learned_bilateral)"
+        )
+    if wavelet is not None:  # a configured transform module (conf/transform/*.yaml) names both
+        if wavelet.level != 1:
+            raise ValueError(f"the network heads use one wavelet level, got level={wavelet.level}")
+        transform, basis = wavelet.transform, wavelet.wavelet
+    head = SharedINR() if head is None else head
+    if not isinstance(head, Head):
+        raise ValueError(f"model.net.head must be a head of wdss.nets.wdss.heads (conf/head/*.yaml), got {head!r}")
+    if head.needs_subbands and transform == "none":
+        raise ValueError(
+            f"head={head.name} needs wavelet subbands, but transform=none has none: use transform=dwt or swt"
+        )
+    return transform, basis, head
+
+
 class WDSSNet(SuperResolutionNet):
     """The WDSS super-resolution network for one transform x basis x head x temporal choice.
 
@@ -317,34 +353,15 @@ class WDSSNet(SuperResolutionNet):
         refine_depth: int = 3,
     ) -> None:
         super().__init__()
-        if output_space not in OUTPUT_SPACES:
-            raise ValueError(f"model.output_space must be one of {', '.join(OUTPUT_SPACES)}, got {output_space!r}")
+        transform, basis, head = _checked_choices(
+            transform, basis, head, wavelet, output_space, upsampler, residual_input
+        )
         self.output_space = output_space
-        if upsampler is not None and not isinstance(upsampler, nn.Module):
-            raise ValueError(
-                f"model.net.upsampler must be a residual upsampler (conf/residual/*.yaml) or None, got {upsampler!r}"
-            )
         # Registered first, as the network always built its learned kernel: the same state_dict order.
         self.upsampler = upsampler
-        if residual_input and upsampler is None:
-            raise ValueError(
-                "model.net.residual_input (recipe.residual_input) needs a residual upsampler "
-                "(residual=bilinear, joint_bilateral or learned_bilateral)"
-            )
         # The G-buffer branch also sees the upsampled irradiance the head corrects: the correction depends on where
         # that upsampling errs, which the network cannot see from the LR and G-buffers alone.
         self.residual_input = bool(residual_input)
-        if wavelet is not None:  # a configured transform module (conf/transform/*.yaml) names both
-            if wavelet.level != 1:
-                raise ValueError(f"the network heads use one wavelet level, got level={wavelet.level}")
-            transform, basis = wavelet.transform, wavelet.wavelet
-        head = SharedINR() if head is None else head
-        if not isinstance(head, Head):
-            raise ValueError(f"model.net.head must be a head of wdss.nets.wdss.heads (conf/head/*.yaml), got {head!r}")
-        if head.needs_subbands and transform == "none":
-            raise ValueError(
-                f"head={head.name} needs wavelet subbands, but transform=none has none: use transform=dwt or swt"
-            )
         self.transform, self.basis, self.head, self.temporal = transform, basis, head, temporal
         self.input_log = input_log
         self.wavelet = WaveletTransform(transform, basis)
@@ -357,28 +374,34 @@ class WDSSNet(SuperResolutionNet):
         self.lr_unshuffle = lr_unshuffle
         self.gbuffer_channels = list(gbuffer_channels) if gbuffer_channels is not None else None
         n_gbuffer = len(self.gbuffer_channels) if self.gbuffer_channels is not None else GBUFFER_CHANNELS
+        # The modules in the order they were always created: the same parameters for the same seed.
         self.lr = LRExtractor(lr_widths, cin=4 * RGB if lr_unshuffle else RGB)
         gbuffer_in = n_gbuffer + 1 + (RGB if self.residual_input else 0)
         self.gbuffer = GBufferExtractor(4 * gbuffer_in, gbuffer_width, gbuffer_block)
         self.temporal_branch = TemporalExtractor(4 * (RGB + 5), temporal_widths) if temporal else None
-        fusion_out, inr_out = head.widths(self.half_channels)
         fusion_in = self.lr.split + self.gbuffer.split + (temporal_widths[-1] if temporal else 0)
+        self._build_head(fusion_in, fusion_widths, fusion_final_relu)
+        self.inr = FourierINR(
+            lr_widths[-1] - self.lr.split, gbuffer_width - self.gbuffer.split, inr_width, mlp_width, mlp_depth,
+            self.head.widths(self.half_channels)[1], self.head.inr_groups, multi_inr_width, final_relu, phase_bias,
+        )  # fmt: skip
+        self._build_exit(exit_init)
+        self.refine = Refinement(RGB + n_gbuffer + 1, refine_width, refine_depth) if refine_width else None
+
+    def _build_head(self, fusion_in: int, fusion_widths: Sequence[int], final_relu: bool) -> None:
+        """The fusion branch: 3x3 convolutions from the extractors' features to the head's fusion output."""
+        fusion_out = self.head.widths(self.half_channels)[0]
         chans = [fusion_in, *fusion_widths]
         layers: list[nn.Module] = [
             m for a, b in zip(chans, chans[1:], strict=False) for m in (conv3x3(a, b), nn.ReLU())
         ]
-        self.fusion = nn.Sequential(
-            *layers, conv3x3(chans[-1], fusion_out), *([nn.ReLU()] if fusion_final_relu else [])
-        )
-        self.inr = FourierINR(
-            lr_widths[-1] - self.lr.split, gbuffer_width - self.gbuffer.split, inr_width, mlp_width, mlp_depth,
-            inr_out, head.inr_groups, multi_inr_width, final_relu, phase_bias,
-        )  # fmt: skip
-        # Exit convolution: on RGB at H (none), on the DWT bands at H/2, on the SWT subbands at H.
-        exit_channels = RGB if transform == "none" else self.coeff_channels
+        self.fusion = nn.Sequential(*layers, conv3x3(chans[-1], fusion_out), *([nn.ReLU()] if final_relu else []))
+
+    def _build_exit(self, exit_init: float) -> None:
+        """The exit convolution: on RGB at H (none), on the DWT bands at H/2, on the SWT subbands at H."""
+        exit_channels = RGB if self.transform == "none" else self.coeff_channels
         self.exit = conv3x3(exit_channels, exit_channels)
-        self.refine = Refinement(RGB + n_gbuffer + 1, refine_width, refine_depth) if refine_width else None
-        if upsampler is not None:
+        if self.upsampler is not None:
             # exit_init 0: the network starts exactly as its upsampler (its correction is zero); > 0 scales the
             # default initialisation instead: a zero exit passes no gradient to the layers before it, which then
             # stay at their random initialisation for long, as the exit's own weights grow only slowly.
