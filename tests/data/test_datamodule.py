@@ -294,11 +294,19 @@ EMITS = {"passes": ["emission"]}
     ],
 )
 def test_a_dataset_rendered_by_an_earlier_wdss_is_refused_by_name(tmp_path, settings, stale):
+    from wdss.render import RenderOnFirstUse
+
     calls = []
+
+    class Recording(RenderOnFirstUse):  # the renderer the config injects, its render recorded instead of run
+        def __call__(self, root):
+            calls.append(root)
+
     write_sequence(tmp_path / "made" / "seq_a", frames=(1, 2), size=(8, 8), scales=())
     sampling = {} if settings.pop("unsampled", False) else {"sampling": {"gbuffer": "point-sampled"}}
     (tmp_path / "made" / "seq_a" / "sequence.json").write_text(json.dumps({"settings": settings, **sampling}))
-    dm = SceneDataModule(tmp_path / "made", {"train": ["seq_a"]}, ["target"], patch_size=None, prepare=calls.append)
+    prepare = Recording("mini", home=tmp_path / "made")
+    dm = SceneDataModule(tmp_path / "made", {"train": ["seq_a"]}, ["target"], patch_size=None, prepare=prepare)
     if stale:
         with pytest.raises(SceneError, match=rf"made/seq_a was rendered by an earlier wdss: .*{stale}.* Remove "):
             dm.prepare_data()

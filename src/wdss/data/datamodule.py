@@ -37,6 +37,7 @@ from wdss.data.cache import FrameCache
 from wdss.data.dataset import Collate, EpochSampler, FrameDataset, Preprocessing, ScaleSpec, parse_scale, requirements
 from wdss.data.layouts import SceneError, discover_sequences
 from wdss.data.packed import PackedSequence, discover_packed, is_packed
+from wdss.data.prepare import Preparer, as_preparer
 from wdss.data.preprocess import RawBatch
 from wdss.data.source import FrameSource
 from wdss.errors import ConfigError
@@ -91,9 +92,11 @@ class SceneDataModule(L.LightningDataModule):
     ``test_lr_source`` the test split's (``None``: the same), so that a model trained on one convention is tested
     on another; ``test_root`` a folder the test split's sequences are read from instead of ``root`` (the same scenes
     rendered under another convention: jittered LR, filtered G-buffers), EXR files only.
-    ``patches_per_frame`` random patches of every training frame make one epoch. ``prepare`` is called with
-    ``root`` by :meth:`prepare_data` when ``root`` does not exist yet (e.g. to render a dataset), or when it holds
-    a wdss render (``sequence.json`` files) that was stopped before every sequence of the splits was finished.
+    ``patches_per_frame`` random patches of every training frame make one epoch. ``prepare`` (a
+    :class:`wdss.data.prepare.Preparer`, or a plain callable) is called with ``root`` by :meth:`prepare_data`
+    when ``root`` does not exist yet (e.g. to render a dataset), or when it holds a render of its own
+    (``sequence.json`` files) that was stopped before every sequence of the splits was finished; what it made
+    earlier and now judges stale or outdated is refused by name.
     """
 
     def __init__(
@@ -117,7 +120,7 @@ class SceneDataModule(L.LightningDataModule):
         first_frame: str = "skip",
         sequence_length: int = 1,
         seed: int = 0,
-        prepare: Callable[[Path], None] | None = None,
+        prepare: Preparer | Callable[[Path], object] | None = None,
         test_inputs: Iterable[str] | None = None,
         format: str = "auto",  # noqa: A002 (the config key's name)
         packed_root: str | Path | None = None,
@@ -163,7 +166,7 @@ class SceneDataModule(L.LightningDataModule):
         self.first_frame = first_frame
         self.sequence_length = sequence_length
         self.seed = seed
-        self.prepare = prepare
+        self.prepare = as_preparer(prepare)
         if isinstance(cache_mb, bool) or not isinstance(cache_mb, int) or cache_mb < 0:
             raise ConfigError(f"data.cache_mb must be an integer >= 0 (0: no cache), got {cache_mb!r}")
         # EXR sequences share one budget per process (each loader worker holds its own cache).
@@ -185,16 +188,12 @@ class SceneDataModule(L.LightningDataModule):
         if self.format != "packed" and not self.root.exists():
             if self.prepare is None:
                 raise SceneError(f"data root {self.root} does not exist")
-            refusal = getattr(self.prepare, "refusal", None)
-            why = refusal(self.root) if refusal is not None else None
+            why = self.prepare.refusal(self.root)
             if why:
                 raise SceneError(why)
             return  # rendered on first use
-        resumes = getattr(self.prepare, "resumes", None)
         resumable = (
-            self.prepare is not None
-            and (resumes is None or resumes(self.root))
-            and any(self.root.glob("*/sequence.json"))
+            self.prepare is not None and self.prepare.resumes(self.root) and any(self.root.glob("*/sequence.json"))
         )
         for split, (names, _) in self.splits.items():
             if split not in splits:
@@ -224,23 +223,19 @@ class SceneDataModule(L.LightningDataModule):
         if not self.root.exists():
             self.prepare(self.root)
             return
-        resumes = getattr(self.prepare, "resumes", None)
-        if resumes is not None and not resumes(self.root):
+        if not self.prepare.resumes(self.root):
             return  # a folder of other frames (one's own, foreign): never rendered into, nor judged as a preset's
-        from wdss.render.sequence import stale_render
-
         rendered = {}
         for sidecar in sorted(self.root.glob("*/sequence.json")):  # rendered on first use by an older wdss?
             meta = json.loads(sidecar.read_text())
-            why = stale_render(meta)
+            why = self.prepare.stale(meta)
             if why:
                 raise SceneError(
                     f"{sidecar.parent} was rendered by an earlier wdss: {why}. Remove {self.root} and it is "
                     "rendered again on first use (or: make data)"
                 )
             rendered[sidecar.parent.name] = meta
-        outdated = getattr(self.prepare, "outdated", None)
-        why = outdated(rendered) if outdated is not None and rendered else None
+        why = self.prepare.outdated(rendered) if rendered else None
         if why:
             raise SceneError(
                 f"{self.root}: {why}. Remove {self.root} and it is rendered again on first use (or: make data)"

@@ -604,10 +604,10 @@ def render_preset(out_dir: str | Path, name: str = "mini") -> list[Path]:
 
 
 class RenderOnFirstUse:
-    """A DataModule's ``prepare`` (``data.prepare``): render the preset ``conf/render/<name>.yaml`` into the
-    dataset's own folder ``home`` when it does not exist yet, or resume that render. A ``data.root`` elsewhere that
-    does not exist is refused (:meth:`refusal`), so that a typo renders nothing; ``anywhere=True`` renders the
-    preset into any ``data.root``."""
+    """A DataModule's ``prepare`` (``data.prepare``, a :class:`wdss.data.prepare.Preparer`): render the preset
+    ``conf/render/<name>.yaml`` into the dataset's own folder ``home`` when it does not exist yet, or resume
+    that render. A ``data.root`` elsewhere that does not exist is refused (:meth:`refusal`), so that a typo
+    renders nothing; ``anywhere=True`` renders the preset into any ``data.root``."""
 
     def __init__(self, name: str = "mini", home: str | Path | None = None, anywhere: bool = False) -> None:
         self.name, self.home, self.anywhere = name, None if home is None else Path(home), bool(anywhere)
@@ -626,6 +626,10 @@ class RenderOnFirstUse:
         """Whether a render stopped part-way in the existing folder ``root`` is this preset's to resume: only in
         its own folder (or anywhere, when asked), never in a folder of other frames that lacks a split's sequence."""
         return self.anywhere or (self.home is not None and Path(root).resolve() == self.home.resolve())
+
+    def stale(self, meta: Mapping[str, Any]) -> str | None:
+        """Why a sequence rendered earlier (its ``sequence.json``) must be rendered again (:func:`stale_render`)."""
+        return stale_render(meta)
 
     def outdated(self, rendered: Mapping[str, Mapping[str, Any]]) -> str | None:
         """Why sequences rendered earlier into this preset's folder (``sequence.json`` by name) are not the preset's
