@@ -8,7 +8,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+CONF = Path(__file__).resolve().parents[2] / "conf"
 # variant -> the size/ entry its model reads; None: plain WDSS (the default model).
 LEARNED = {None: "wdss", "dfasr": "wdss", "nsrr": "nsrr", "fusesr": "fusesr", "real_esrgan": "real_esrgan"}
 

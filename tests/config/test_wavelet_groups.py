@@ -10,7 +10,7 @@ from hydra.utils import instantiate
 
 from wdss.wavelets import WaveletTransform
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+CONF = Path(__file__).resolve().parents[2] / "conf"
 
 
 def options(group: str) -> list[str]:
