@@ -27,6 +27,8 @@ def module(transform="swt", basis="haar", head="shared_inr", temporal=True, widt
         "temporal": temporal,
         **{k: list(v) if isinstance(v, tuple) else v for k, v in widths.items()},
     }
+    if kwargs.get("upsampler") is not None:
+        net["upsampler"] = kwargs.pop("upsampler")
     kwargs.pop("flip", None)
     mode = temporal_mode or ("gt_history" if temporal else "none")
     weights = kwargs.pop("weights", WEIGHTS)
@@ -268,3 +270,24 @@ def test_flip_is_a_test_metric_and_in_validation_only_when_asked(in_validation):
         model._evaluate(data, "test", "_2x")
     assert {"test/flip_2x", "test/flip_hdr_2x", "test/psnr_2x"} <= set(logged)
     assert ("val/flip" in logged) == ("val/flip_hdr" in logged) == in_validation and "val/psnr" in logged
+
+
+def test_the_kernel_can_learn_at_its_own_rate_and_by_default_shares_the_networks():
+    kernel = {"_target_": "wdss.nets.upsamplers.learned_bilateral.LearnedBilateralUpsample", "hidden": 4}
+    adam = {"_target_": "torch.optim.Adam", "_partial_": True, "lr": 2e-3}
+    same = module(temporal=False, upsampler=kernel, optimizer=adam)
+    net_params = {id(p) for p in same.net.parameters()}
+    (group,) = same.configure_optimizers().param_groups
+    assert {id(p) for p in group["params"]} == net_params and group["lr"] == 2e-3
+
+    apart = module(temporal=False, upsampler=kernel, optimizer=adam, upsampler_lr_scale=3.0)
+    rest, own = apart.configure_optimizers().param_groups
+    kernel_params = {id(p) for p in apart.net.upsampler.parameters()}
+    assert kernel_params and {id(p) for p in own["params"]} == kernel_params
+    assert {id(p) for p in rest["params"]} == {id(p) for p in apart.net.parameters()} - kernel_params
+    assert rest["lr"] == 2e-3 and own["lr"] == pytest.approx(6e-3)
+    assert apart.hparams.upsampler_lr_scale == 3.0
+
+    # a network without a residual upsampler (and a checkpoint of before the option) keeps one group
+    (alone,) = module(temporal=False, optimizer=adam, upsampler_lr_scale=3.0).configure_optimizers().param_groups
+    assert alone["lr"] == 2e-3

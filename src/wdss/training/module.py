@@ -71,6 +71,7 @@ class SuperResolutionModule(L.LightningModule):
         loss_space: str = "linear",
         tonemap_exposure: float | str | None = None,
         warmup_steps: int = 0,
+        upsampler_lr_scale: float = 1.0,
     ) -> None:
         super().__init__()
         # Plain containers only: checkpoints then load with weights_only=True and rebuild the network.
@@ -89,6 +90,7 @@ class SuperResolutionModule(L.LightningModule):
             "loss_space": loss_space,
             "tonemap_exposure": tonemap_exposure,
             "warmup_steps": int(warmup_steps),
+            "upsampler_lr_scale": float(upsampler_lr_scale),
         }
         if not isinstance(net, nn.Module):
             hparams["net"] = _plain(net)
@@ -345,11 +347,26 @@ class SuperResolutionModule(L.LightningModule):
     def configure_optimizers(self) -> Any:
         if not self.trainable:
             return None
-        optimizer = instantiate(self.optimizer_config, at="optimizer")(self.net.parameters())
+        optimizer = self._optimizer()
         if not self.scheduler_config:
             return optimizer
         scheduler = instantiate(self.scheduler_config, at="scheduler")(optimizer)
         return {"optimizer": optimizer, "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"}}
+
+    def _optimizer(self) -> torch.optim.Optimizer:
+        """The configured optimiser over the network; with ``upsampler_lr_scale`` != 1 the residual upsampler's own
+        parameters (the learned kernel the network adds to) form a second group at that multiple of the lr."""
+        build = instantiate(self.optimizer_config, at="optimizer")
+        scale = self.hparams.get("upsampler_lr_scale", 1.0)  # absent from checkpoints written before the option
+        upsampler = self.net.upsampler
+        kernel = list(upsampler.parameters()) if upsampler is not None and upsampler is not self.net else []
+        if scale == 1.0 or not kernel:
+            return build(self.net.parameters())
+        own = {id(p) for p in kernel}
+        rest = [p for p in self.net.parameters() if id(p) not in own]
+        optimizer = build([{"params": rest}, {"params": kernel}] if rest else [{"params": kernel}])
+        optimizer.param_groups[-1]["lr"] *= scale
+        return optimizer
 
     def optimizer_step(self, epoch: int, batch_idx: int, optimizer: Any, optimizer_closure: Any = None) -> None:
         # Linear learning-rate warm-up over the first warmup_steps optimiser steps (Lightning's recipe: scale the
