@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from hydra import compose, initialize_config_dir
 
 from wdss.data import (
     BATCH_KEYS,
@@ -149,6 +150,22 @@ def test_same_seed_same_batches(root):
     a, b = first_batch(), first_batch()
     assert a["frame"].tolist() == b["frame"].tolist()
     torch.testing.assert_close(a["target"], b["target"])
+
+
+def test_another_seed_draws_other_batches_and_the_data_group_follows_the_runs_seed(root):
+    def first_batch(seed):
+        dm = SceneDataModule(root, {"train": ["seq_a"]}, ["target", "gbuffer"], patch_size=12, batch_size=2, seed=seed)
+        dm.setup("fit")
+        return next(iter(dm.train_dataloader()))
+
+    assert not torch.equal(first_batch(7)["target"], first_batch(8)["target"])
+    # seed=S varies the data's draws too, not only the weights: an interval over seeds holds both
+    conf = Path(__file__).resolve().parents[2] / "conf"
+    with initialize_config_dir(config_dir=str(conf), version_base="1.3"):
+        for experiment in ("cpu", "bench"):
+            cfg = compose("train", overrides=[f"experiment={experiment}", "seed=3"])
+            assert cfg.data.seed == 3, experiment
+        assert compose("eval", overrides=["ckpt_path=x"]).data.seed == 0
 
 
 def test_flips_mirror_only_sequences_with_camera_rotations(root, caplog):
