@@ -31,7 +31,13 @@ LABELS = {
     "fusesr": "FuseSR",
     "dfasr": "DFASR",
 }
-SCALES = {"ablation_wavelet": "2x", "ablation_arch": "2x", "methods": "3x", "scales": "avg"}
+SCALES = {
+    "ablation_wavelet": "2x",
+    "ablation_wavelet_loss": "2x",
+    "ablation_arch": "2x",
+    "methods": "3x",
+    "scales": "avg",
+}
 ORDERINGS = {
     "ablation_wavelet": (
         ("none", "<", "dwt_haar"),

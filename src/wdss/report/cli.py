@@ -36,6 +36,13 @@ def parser() -> argparse.ArgumentParser:
         "paper table's: 2x for the ablations, 3x for methods, avg for scales)",
     )
     parser.add_argument(
+        "--facts",
+        default=None,
+        metavar="SWEEP",
+        help="state this sweep file's row names, table scale and orderings (sweeps/SWEEP.yaml's report node) about "
+        "the runs, e.g. --runs of a table whose rows two sweeps ran (default: the sweep of the parent run)",
+    )
+    parser.add_argument(
         "--runtime",
         default=None,
         metavar="SWEEP",
@@ -62,4 +69,5 @@ def main(argv: Sequence[str] | None = None) -> None:
         out_dir=args.out,
         scale=args.scale,
         runtime=args.runtime,
+        facts=args.facts,
     )

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from wdss.report.costs import costs
-from wdss.report.facts import paper_facts
+from wdss.report.facts import paper_facts, sweep_files
 from wdss.report.orderings import orderings, over_kernel
 from wdss.report.plots import frames_plot, qualitative_figure, tradeoff_plot
 from wdss.report.rows import group, tags_of
@@ -46,6 +46,7 @@ def report(
     out_dir: str | Path = "outputs/reports",
     scale: str | None = None,
     runtime: str | None = None,
+    facts: str | None = None,
 ) -> Path:
     """Write the table, trade-off plot and qualitative figure of a sweep (``sweep`` or ``parent``; logged on the
     parent run too) or of any runs (``runs`` by id, or ``experiment`` with an MLflow ``filter_string``).
@@ -55,8 +56,13 @@ def report(
     ms/frame and GFLOPs, all timed by one process, the trade-off plot shows for each row.
 
     The paper's row names, table scale and orderings are the sweep file's ``report`` node (:mod:`wdss.report.facts`),
-    of the sweep the parent run is tagged with; runs of no sweep are named by every sweep file's labels.
+    of ``facts`` (a sweep file's name: runs by id that make up that table, e.g. a sweep's jobs with rows another
+    sweep ran) or else of the sweep the parent run is tagged with; runs of no sweep are named by every sweep file's
+    labels.
     """
+    if facts is not None and facts not in sweep_files():
+        known = ", ".join(sweep_files())
+        raise SystemExit(f"wdss.report: --facts {facts!r} is not a sweep file (sweeps/*.yaml: {known})")
     client = tracking_client(tracking_uri)
     if runs or experiment:
         parent_run = None
@@ -70,14 +76,14 @@ def report(
             raise SystemExit(f"wdss.report: the sweep {name!r} ({parent_run.info.run_id}) has no jobs")
         check_one_dataset(parent_run, selected)
     runs = selected
-    facts = paper_facts(parent_run.data.tags.get("sweep") if parent_run is not None else None)
-    groups = group(runs, facts.labels)
+    stated = paper_facts(facts or (parent_run.data.tags.get("sweep") if parent_run is not None else None))
+    groups = group(runs, stated.labels)
     rows = list(groups)
     metrics, notes = summarise(groups)
     timing = runtime_runs(client, runtime) if runtime else []
-    cost = costs(groups, metrics, timing, runtime or "", facts.labels)
+    cost = costs(groups, metrics, timing, runtime or "", stated.labels)
     scales = test_scales(metrics)
-    shown = table_scale(facts.scale, scales, scale)
+    shown = table_scale(stated.scale, scales, scale)
     columns = compact_columns(metrics, shown, scales)
     statuses = Counter(sorted((run.info.status for run in runs), key=lambda status: status != "FINISHED"))
     counts = ", ".join(f"{n} {status.lower() if status == 'FINISHED' else status}" for status, n in statuses.items())
@@ -89,7 +95,7 @@ def report(
         + compact_table(
             rows, metrics, notes, columns, scales, {row: tags_of(g[0]).get("data_root") for row, g in groups.items()}
         )
-        + "".join(orderings(facts, groups, at, scales) for at in [shown, *(s for s in scales if s != shown)])
+        + "".join(orderings(stated, groups, at, scales) for at in [shown, *(s for s in scales if s != shown)])
         + over_kernel(groups, scales)
         + (TEMPORAL_NOTE if any("twe_ratio" in key or "tpsnr" in key for key, *_ in columns) else "")
         + (noise_ceiling_note(runs) if scales else "")
