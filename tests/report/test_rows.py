@@ -45,3 +45,27 @@ def test_runs_named_variant_first_are_read_by_their_overrides_tag(tmp_path):
     assert overrides(Run) == {"data.patch_size": "48", "seed": "0", "variant": "swt_haar"}
     Run.data.tags["overrides"] = ""  # a run of the defaults
     assert overrides(Run) == {}
+
+
+def test_where_a_run_is_tracked_and_the_scales_it_was_tested_at_split_no_rows(tmp_path):
+    """Runs of one configuration tracked in another experiment or tested at more scales (a baseline run again with
+    ``data.test_scales=[2.0,3.0,4.0]``) are seeds of one row, named without those keys."""
+    jobs = [
+        ({"variant": "bicubic", "seed": "0"}, {"test/psnr_3x": 20.0}, "FINISHED"),
+        (
+            {
+                "variant": "bicubic",
+                "seed": "1",
+                "experiment_name": "m",
+                "data.test_scales": "[2.0,3.0]",
+                "video": "true",
+            },
+            {"test/psnr_3x": 20.0},
+            "FINISHED",
+        ),
+        ({"variant": "swt_db4", "seed": "0", "data.patch_size": "48"}, {"test/psnr_3x": 24.0}, "FINISHED"),
+    ]
+    uri = fake_sweep(tmp_path, "methods", jobs, old=False)
+    _, rows = body((report("methods", tracking_uri=uri, out_dir=tmp_path / "reports") / "table.md").read_text())
+    assert list(rows) == ["Bicubic, data.patch_size=default", "SWT-db4, data.patch_size=48"]
+    assert rows["Bicubic, data.patch_size=default"][-1] == "2"

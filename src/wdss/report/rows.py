@@ -27,10 +27,15 @@ def overrides(run) -> dict[str, str]:
     return dict(items)
 
 
+# Override keys that never make another configuration: the seed (a row's repeats), where a run is tracked, which
+# scales it was tested at (each a column of its own) and what it writes besides its metrics.
+NOT_AXES = frozenset({"seed", "experiment_name", "data.test_scales", "video", "write_outputs"})
+
+
 def sweep_axes(runs: Sequence) -> list[str]:
-    """The override keys whose value differs between the jobs (the sweep's axes), the seed left out."""
+    """The override keys whose value differs between the jobs (the sweep's axes), :data:`NOT_AXES` left out."""
     jobs = [overrides(run) for run in runs]
-    keys = sorted({key for job in jobs for key in job} - {"seed"})
+    keys = sorted({key for job in jobs for key in job} - NOT_AXES)
     return [key for key in keys if len({job.get(key) for job in jobs}) > 1]
 
 
