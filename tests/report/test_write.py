@@ -50,8 +50,8 @@ def test_runs_by_id_take_the_facts_of_the_sweep_file_they_are_named_for(tmp_path
     ]
     uri = fake_sweep(tmp_path, "other", jobs)
     client = MlflowClient(uri)
-    ids = [r.info.run_id for r in client.search_runs([client.get_experiment_by_name("other").experiment_id])]
-    ids = [i for i in ids if "mlflow.parentRunId" in client.get_run(i).data.tags]
+    runs = client.search_runs([client.get_experiment_by_name("other").experiment_id])
+    ids = [r.info.run_id for r in runs if "mlflow.parentRunId" in r.data.tags]  # the jobs, not the parent
     text = (report(runs=ids, facts="methods", tracking_uri=uri, out_dir=tmp_path / "a") / "table.md").read_text()
     assert "Test metrics at 3x" in text and "- Bicubic < Real-ESRGAN: holds, +1.00 ± 0.00 dB, n=2" in text
     plain = (report(runs=ids, tracking_uri=uri, out_dir=tmp_path / "b") / "table.md").read_text()

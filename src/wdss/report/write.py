@@ -60,9 +60,8 @@ def report(
     sweep ran) or else of the sweep the parent run is tagged with; runs of no sweep are named by every sweep file's
     labels.
     """
-    if facts is not None and facts not in sweep_files():
-        known = ", ".join(sweep_files())
-        raise SystemExit(f"wdss.report: --facts {facts!r} is not a sweep file (sweeps/*.yaml: {known})")
+    if facts is not None and facts not in (known := sweep_files()):
+        raise SystemExit(f"wdss.report: --facts {facts!r} is not a sweep file (sweeps/*.yaml: {', '.join(known)})")
     client = tracking_client(tracking_uri)
     if runs or experiment:
         parent_run = None
